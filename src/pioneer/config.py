@@ -10,7 +10,7 @@ from typing import Any, Self
 
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["Config", "check_positive", "check_nonnegative", "check_range"]
+__all__ = ["Config", "check_nonnegative", "check_positive", "check_range"]
 
 
 def check_positive(owner: str, name: str, value: float) -> None:

@@ -26,8 +26,9 @@ Deviations from a bare social-force model, all documented in docs/simulator.md:
 - A human on its last leg whose body has fully left the map bounds is removed (GONE).
 - A human may have a start delay and may wait until given other humans have left the map or
   arrived (boarders let the exiting passenger out of the doorway first); until then it
-  holds its start position with the same social-force drive, so it can be nudged aside. Pure social force with the paper's 0.6 m bodies
-  deadlocks in a 1.8 m door when both flows meet there.
+  holds its start position with the same social-force drive, so it can be nudged aside.
+  Pure social force with the paper's 0.6 m bodies deadlocks in a 1.8 m door when both flows
+  meet there.
 """
 
 from __future__ import annotations
@@ -264,7 +265,9 @@ def sfm_substep(
                     wp_index[i] = k + 1
         # Leaving: only a human on its last leg, once its body is fully outside the map.
         r = radius[i]
-        outside = px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
+        outside = (
+            px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
+        )
         if outside and ready[i] and wp_index[i] >= n_waypoints[i] - 1:
             status[i] = GONE
             vel[i, 0] = 0.0

@@ -260,7 +260,7 @@ def _resample_kernel(
 ) -> NDArray[np.float64]:
     n = vals.shape[0]
     period = 2.0 * math.pi / inc
-    w = int(math.ceil(tol / inc)) + 1
+    w = math.ceil(tol / inc) + 1
     out = np.full(n_target, cap)
     for t in range(n_target):
         a = 2.0 * math.pi * t / n_target
@@ -268,7 +268,7 @@ def _resample_kernel(
         best_d = np.inf
         best_v = cap
         for base in (u, u - period):
-            c = int(math.floor(base))
+            c = math.floor(base)
             for s in range(c - w, c + w + 2):
                 if s < 0 or s >= n or not valid[s]:
                     continue

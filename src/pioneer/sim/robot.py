@@ -62,7 +62,9 @@ def validate_command(u: NDArray[np.float64] | list[float], batch: int) -> NDArra
         arr = arr.reshape(1, 2)
     if arr.shape != (batch, 2):
         raise CommandError(
-            expect("command", f"shape ({batch}, 2) of (v, ω)", arr.shape, "pass one (v, ω) per copy")
+            expect(
+                "command", f"shape ({batch}, 2) of (v, ω)", arr.shape, "pass one (v, ω) per copy"
+            )
         )
     if not np.all(np.isfinite(arr)):
         raise CommandError(

@@ -149,7 +149,11 @@ class ScenarioConfig(Config):
 
     def world(self) -> World:
         """The static :class:`World` of this scenario."""
-        return World(walls=np.asarray(self.walls, dtype=np.float64), bounds=np.asarray(self.bounds), sim=self.sim)
+        return World(
+            walls=np.asarray(self.walls, dtype=np.float64),
+            bounds=np.asarray(self.bounds),
+            sim=self.sim,
+        )
 
 
 def _wall_distance(p: np.ndarray, walls: np.ndarray) -> float:
@@ -312,7 +316,9 @@ def elevator_scenario(
                 v_pref_choices=lay.v_pref_choices,
             )
         )
-    goal = Region(x=(-(hw_c - r_r - 0.15), -min(hw_c - r_r - 0.15, 0.45)), y=(1.0, depth - r_r - 0.2))
+    goal = Region(
+        x=(-(hw_c - r_r - 0.15), -min(hw_c - r_r - 0.15, 0.45)), y=(1.0, depth - r_r - 0.2)
+    )
     default_name = "hr-rl" if side > 0 else "hl-rr"
     return ScenarioConfig(
         name=name or default_name,
@@ -353,7 +359,12 @@ def static_study_scenario(
     """The synthetic static study: start below the human, goal above, two corridors."""
     lay = layout or StaticStudyLayout()
     w, ln = lay.width / 2, lay.length / 2
-    walls: tuple[Segment, ...] = ((-w, -ln, w, -ln), (w, -ln, w, ln), (w, ln, -w, ln), (-w, ln, -w, -ln))
+    walls: tuple[Segment, ...] = (
+        (-w, -ln, w, -ln),
+        (w, -ln, w, ln),
+        (w, ln, -w, ln),
+        (-w, ln, -w, -ln),
+    )
     human = HumanSpec(
         role="static",
         start=Region(x=(0.0, 0.0), y=(0.0, 0.0)),
@@ -366,7 +377,9 @@ def static_study_scenario(
         name="static",
         walls=walls,
         bounds=(-w, w, -ln, ln),
-        robot_start=Region(x=(-lay.start_half_width, lay.start_half_width), y=(lay.start_y, lay.start_y)),
+        robot_start=Region(
+            x=(-lay.start_half_width, lay.start_half_width), y=(lay.start_y, lay.start_y)
+        ),
         robot_goal=Region(x=(0.0, 0.0), y=(lay.goal_y, lay.goal_y)),
         robot_heading=(math.pi / 2, math.pi / 2),
         humans=(human,),

@@ -74,7 +74,7 @@ class World:
     @property
     def sfm_params(self) -> F64:
         """Packed social-force parameters for the kernels."""
-        return self._sfm_params  # type: ignore[attr-defined, no-any-return]
+        return self._sfm_params  # type: ignore[attr-defined]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -116,17 +116,19 @@ class State:
     def repeat(self, n: int) -> State:
         """``n`` copies of a single-copy state (B = 1 → B = n)."""
         if self.batch_size != 1:
-            raise ConfigError(expect("State.repeat", "a state with B = 1", self.batch_size, "take(i)"))
-        return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})
+            raise ConfigError(
+                expect("State.repeat", "a state with B = 1", self.batch_size, "take(i)")
+            )
+        return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})  # type: ignore[arg-type]
 
     def take(self, index: int | NDArray[np.int64]) -> State:
         """The copies at ``index`` (an int keeps a batch axis of 1)."""
         idx = np.atleast_1d(np.asarray(index))
-        return State(**{k: v[idx].copy() for k, v in self._arrays().items()})
+        return State(**{k: v[idx].copy() for k, v in self._arrays().items()})  # type: ignore[arg-type]
 
     def copy(self) -> State:
         """A deep copy (states are treated as values; the kernels work on copies)."""
-        return State(**{k: v.copy() for k, v in self._arrays().items()})
+        return State(**{k: v.copy() for k, v in self._arrays().items()})  # type: ignore[arg-type]
 
     def _arrays(self) -> dict[str, NDArray[np.generic]]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

@@ -1,0 +1,55 @@
+"""The one interface every controller implements: teacher, baselines and students.
+
+A policy sees the observation (29-D, SPEC 1.4) and the environment's ``info`` dict, whose
+``state`` and ``world`` entries give privileged controllers the full simulator state. Policies
+hold their own RNG, seeded by ``reset``, and never touch the global numpy RNG.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.errors import ConfigError, expect
+
+__all__ = ["Policy", "make_policy", "policy_names", "register_policy"]
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """A controller: ``reset`` at the start of an episode, then one ``act`` per 0.1 s step."""
+
+    name: str
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        """Start an episode; ``info`` is what ``env.reset`` returned."""
+        ...
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        """The command ``(v [m/s], ω [rad/s])`` for this step, shape ``(2,)``."""
+        ...
+
+
+_FACTORIES: dict[str, Callable[..., Policy]] = {}
+
+
+def register_policy(name: str, factory: Callable[..., Policy]) -> None:
+    """Make a policy constructible by name (CLI, evaluation harness)."""
+    _FACTORIES[name] = factory
+
+
+def policy_names() -> list[str]:
+    """Registered policy names."""
+    return sorted(_FACTORIES)
+
+
+def make_policy(name: str, **kwargs: Any) -> Policy:
+    """Construct a registered policy by name."""
+    if name not in _FACTORIES:
+        raise ConfigError(
+            expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
+        )
+    return _FACTORIES[name](**kwargs)
