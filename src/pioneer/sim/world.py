@@ -124,11 +124,11 @@ class State:
     def take(self, index: int | NDArray[np.int64]) -> State:
         """The copies at ``index`` (an int keeps a batch axis of 1)."""
         idx = np.atleast_1d(np.asarray(index))
-        return State(**{k: v[idx].copy() for k, v in self._arrays().items()})  # type: ignore[arg-type]
+        return State(**{k: v[idx].copy() for k, v in self._arrays().items()})
 
     def copy(self) -> State:
         """A deep copy (states are treated as values; the kernels work on copies)."""
-        return State(**{k: v.copy() for k, v in self._arrays().items()})  # type: ignore[arg-type]
+        return State(**{k: v.copy() for k, v in self._arrays().items()})
 
     def _arrays(self) -> dict[str, NDArray[np.generic]]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
