@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -119,7 +120,7 @@ class State:
             raise ConfigError(
                 expect("State.repeat", "a state with B = 1", self.batch_size, "take(i)")
             )
-        return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})  # type: ignore[arg-type]
+        return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})
 
     def take(self, index: int | NDArray[np.int64]) -> State:
         """The copies at ``index`` (an int keeps a batch axis of 1)."""
@@ -130,7 +131,7 @@ class State:
         """A deep copy (states are treated as values; the kernels work on copies)."""
         return State(**{k: v.copy() for k, v in self._arrays().items()})
 
-    def _arrays(self) -> dict[str, NDArray[np.generic]]:
+    def _arrays(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
     @property
