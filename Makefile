@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench clean
+.PHONY: demo test lint typecheck pytest bench clean clean-cache
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -34,5 +34,9 @@ pytest: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/run.py
 
-clean:
+## Drop numba's on-disk caches (after editing a kernel that other kernels call).
+clean-cache:
+	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
+
+clean: clean-cache
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
