@@ -42,13 +42,14 @@ from numpy.typing import NDArray
 
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
-from pioneer.sim.geometry import closest_point_on_segment
+from pioneer.sim.geometry import closest_point_on_segment, norm2d
 
 __all__ = ["ARRIVED", "GONE", "WALKING", "SocialForceConfig", "sfm_substep"]
 
 WALKING = 0  # moves toward its waypoints
 ARRIVED = 1  # reached its final goal; stays as a static obstacle
 GONE = 2  # left the map; ignored by forces, sensing and collisions
+EXP_CUTOFF = -12.0  # repulsion terms below A·e^-12 (< 1e-5 m/s²) are skipped
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +120,7 @@ def sfm_substep(
     delay: NDArray[np.float64],  # (N,) [s] a human starts walking at t >= delay
     wait_for: NDArray[np.int64],  # (N, N) 1 where human i waits until human j left or arrived
     home: NDArray[np.float64],  # (N, 2) [m] where a waiting human holds its position
+    scratch: NDArray[np.float64],  # (N, 4) work space (avoids an allocation per substep)
     t_now: float,  # [s] time at the start of the substep
     rx: float,
     ry: float,
@@ -143,27 +145,32 @@ def sfm_substep(
     settle_d = params[11]
     n = pos.shape[0]
     m = walls.shape[0]
-    fx = np.zeros(n)
-    fy = np.zeros(n)
-    ready = np.empty(n, dtype=np.bool_)
+    fx = scratch[:, 0]
+    fy = scratch[:, 1]
+    ready = scratch[:, 2]  # 1.0 = walking toward its waypoints, 0.0 = waiting or stopped
+    wall_d = scratch[:, 3]  # distance to the nearest wall at the start of the substep [m]
     for i in range(n):
-        ready[i] = status[i] == WALKING and t_now >= delay[i]
+        fx[i] = 0.0
+        fy[i] = 0.0
+        wall_d[i] = np.inf
+        r_i = status[i] == WALKING and t_now >= delay[i]
         for j in range(n):
             if wait_for[i, j] and status[j] == WALKING:
-                ready[i] = False
+                r_i = False
+        ready[i] = 1.0 if r_i else 0.0
     # Forces are computed from the positions at the start of the substep for every human.
     for i in range(n):
         if status[i] != WALKING:
             continue
         px = pos[i, 0]
         py = pos[i, 1]
-        if ready[i]:
+        if ready[i] > 0.0:
             # Waypoint bookkeeping: pass intermediate waypoints, stop at the final goal.
             k = wp_index[i]
             while True:
                 gx = waypoints[i, k, 0]
                 gy = waypoints[i, k, 1]
-                dg = math.hypot(gx - px, gy - py)
+                dg = norm2d(gx - px, gy - py)
                 last = k >= n_waypoints[i] - 1
                 if last:
                     break
@@ -181,7 +188,7 @@ def sfm_substep(
             # Waiting: hold the home position by the same social-force drive.
             gx = home[i, 0]
             gy = home[i, 1]
-            dg = math.hypot(gx - px, gy - py)
+            dg = norm2d(gx - px, gy - py)
             if dg < 0.05:
                 dg = 0.0
         ex = (gx - px) / dg if dg > 0.0 else 0.0
@@ -193,16 +200,18 @@ def sfm_substep(
                 continue
             dx = px - pos[j, 0]
             dy = py - pos[j, 1]
-            d = math.hypot(dx, dy)
-            if d > 1e-9:
-                mag = a_h * math.exp((radius[i] + radius[j] - d) / b_h)
+            d = norm2d(dx, dy)
+            z = (radius[i] + radius[j] - d) / b_h
+            if d > 1e-9 and z > EXP_CUTOFF:
+                mag = a_h * math.exp(z)
                 ax += mag * dx / d
                 ay += mag * dy / d
         dx = px - rx
         dy = py - ry
-        d = math.hypot(dx, dy)
-        if d > 1e-9:
-            mag = a_r * math.exp((radius[i] + r_robot - d) / b_r)
+        d = norm2d(dx, dy)
+        z = (radius[i] + r_robot - d) / b_r
+        if d > 1e-9 and z > EXP_CUTOFF:
+            mag = a_r * math.exp(z)
             ax += mag * dx / d
             ay += mag * dy / d
         for w in range(m):
@@ -211,9 +220,11 @@ def sfm_substep(
             )
             dx = px - cx
             dy = py - cy
-            d = math.hypot(dx, dy)
-            if d > 1e-9:
-                mag = a_w * math.exp((radius[i] - d) / b_w)
+            d = norm2d(dx, dy)
+            wall_d[i] = min(wall_d[i], d)
+            z = (radius[i] - d) / b_w
+            if d > 1e-9 and z > EXP_CUTOFF:
+                mag = a_w * math.exp(z)
                 ax += mag * dx / d
                 ay += mag * dy / d
         fx[i] = ax
@@ -223,52 +234,118 @@ def sfm_substep(
             continue
         vx = vel[i, 0] + fx[i] * h
         vy = vel[i, 1] + fy[i] * h
-        sp = math.hypot(vx, vy)
+        sp = norm2d(vx, vy)
         vmax = cap * vpref[i]
         if sp > vmax:
             vx *= vmax / sp
             vy *= vmax / sp
         px = pos[i, 0] + vx * h
         py = pos[i, 1] + vy * h
+        # Hard walls (skipped when the body was clear of every wall by more than its step).
+        if wall_d[i] - norm2d(vx * h, vy * h) > radius[i]:
+            pos[i, 0] = px
+            pos[i, 1] = py
+            vel[i, 0] = vx
+            vel[i, 1] = vy
+            _settle_and_leave(
+                i,
+                px,
+                py,
+                vx,
+                vy,
+                pos,
+                vel,
+                waypoints,
+                n_waypoints,
+                wp_index,
+                status,
+                ready,
+                radius,
+                bounds,
+                settle_v,
+                settle_d,
+            )
+            continue
         # Hard walls: project an overlapping body back to contact, drop the inward velocity.
-        for _ in range(2):
+        for _ in range(2):  # a second pass only if the first one moved the body (corners)
+            moved = False
             for w in range(m):
                 cx, cy = closest_point_on_segment(
                     px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
                 )
                 dx = px - cx
                 dy = py - cy
-                d = math.hypot(dx, dy)
+                d = norm2d(dx, dy)
                 if d < radius[i] and d > 1e-12:
                     nx = dx / d
                     ny = dy / d
                     px = cx + nx * radius[i]
                     py = cy + ny * radius[i]
+                    moved = True
                     vn = vx * nx + vy * ny
                     if vn < 0.0:
                         vx -= vn * nx
                         vy -= vn * ny
+            if not moved:
+                break
         pos[i, 0] = px
         pos[i, 1] = py
         vel[i, 0] = vx
         vel[i, 1] = vy
-        if ready[i] and math.hypot(vx, vy) < settle_v:
-            # Stalled near its target (a jam in a full cabin): take the target as reached.
-            k = wp_index[i]
-            dg = math.hypot(waypoints[i, k, 0] - px, waypoints[i, k, 1] - py)
-            if dg < settle_d:
-                if k >= n_waypoints[i] - 1:
-                    status[i] = ARRIVED
-                    vel[i, 0] = 0.0
-                    vel[i, 1] = 0.0
-                else:
-                    wp_index[i] = k + 1
-        # Leaving: only a human on its last leg, once its body is fully outside the map.
-        r = radius[i]
-        outside = (
-            px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
+        _settle_and_leave(
+            i,
+            px,
+            py,
+            vx,
+            vy,
+            pos,
+            vel,
+            waypoints,
+            n_waypoints,
+            wp_index,
+            status,
+            ready,
+            radius,
+            bounds,
+            settle_v,
+            settle_d,
         )
-        if outside and ready[i] and wp_index[i] >= n_waypoints[i] - 1:
-            status[i] = GONE
-            vel[i, 0] = 0.0
-            vel[i, 1] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _settle_and_leave(
+    i: int,
+    px: float,
+    py: float,
+    vx: float,
+    vy: float,
+    pos: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    waypoints: NDArray[np.float64],
+    n_waypoints: NDArray[np.int64],
+    wp_index: NDArray[np.int64],
+    status: NDArray[np.int8],
+    ready: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    bounds: NDArray[np.float64],
+    settle_v: float,
+    settle_d: float,
+) -> None:
+    if ready[i] > 0.0 and norm2d(vx, vy) < settle_v:
+        # Stalled near its target (a jam in a full cabin): take the target as reached.
+        k = wp_index[i]
+        dg = math.hypot(waypoints[i, k, 0] - px, waypoints[i, k, 1] - py)
+        if dg < settle_d:
+            if k >= n_waypoints[i] - 1:
+                status[i] = ARRIVED
+                vel[i, 0] = 0.0
+                vel[i, 1] = 0.0
+            else:
+                wp_index[i] = k + 1
+    # Leaving: only a human on its last leg, once its body is fully outside the map.
+    r = radius[i]
+    outside = px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
+    if outside and ready[i] > 0.0 and wp_index[i] >= n_waypoints[i] - 1:
+        status[i] = GONE
+        vel[i, 0] = 0.0
+        vel[i, 1] = 0.0

@@ -24,7 +24,12 @@ from numpy.typing import NDArray
 
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
-from pioneer.sim.geometry import segment_segment_distance, swept_point_distance
+from pioneer.sim.geometry import (
+    norm2d,
+    point_segment_distance,
+    segment_segment_distance,
+    swept_point_distance,
+)
 from pioneer.sim.humans import GONE, SocialForceConfig, sfm_substep
 from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
 from pioneer.sim.robot import RobotConfig, clip_command, integrate_unicycle, validate_command
@@ -219,6 +224,7 @@ def _step_kernel(
     m = walls.shape[0]
     h = dt / n_sub
     old = np.empty((n_h, 2))
+    scratch = np.empty((n_h, 3))
     was_present = np.empty(n_h, dtype=np.bool_)
     for b in range(n_b):
         x = robot[b, 0]
@@ -246,6 +252,7 @@ def _step_kernel(
                 hdelay[b],
                 hwait[b],
                 hhome[b],
+                scratch,
                 t[b] + s * h,
                 x,
                 y,
@@ -263,7 +270,16 @@ def _step_kernel(
                     old[i, 0] - x, old[i, 1] - y, hpos[b, i, 0] - x1, hpos[b, i, 1] - y1
                 )
                 cmin = min(cmin, d - r_robot - hrad[b, i] - sag)
+            half = 0.5 * norm2d(x1 - x, y1 - y)
+            mx = 0.5 * (x + x1)
+            my = 0.5 * (y + y1)
             for k in range(m):
+                # Cheap bound first: the chord lies within `half` of its midpoint.
+                dm = point_segment_distance(
+                    mx, my, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
+                )
+                if dm - half - r_robot - sag >= wmin:
+                    continue
                 d = segment_segment_distance(
                     x, y, x1, y1, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
                 )

@@ -1,0 +1,28 @@
+"""Shared pytest setup: make the helper module importable and expose common fixtures."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+_HERE = str(Path(__file__).resolve().parent)
+if _HERE not in sys.path:
+    sys.path.insert(0, _HERE)
+
+import pioneer_testutils as tu  # noqa: E402
+
+
+@pytest.fixture
+def rng() -> object:
+    """A seeded generator (never the global numpy RNG)."""
+    import numpy as np
+
+    return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def open_world() -> object:
+    """A world without walls and with far-away bounds."""
+    return tu.open_world()

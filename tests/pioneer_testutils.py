@@ -1,0 +1,131 @@
+"""Helpers shared by the test modules: hand-built states, worlds and reference geometry."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from pioneer.sim.humans import WALKING
+from pioneer.sim.world import SimConfig, State, World
+
+__all__ = [
+    "assert_house_message",
+    "concat_states",
+    "make_state",
+    "open_world",
+    "room_world",
+    "states_equal",
+    "wall_distances",
+]
+
+
+def open_world(sim: SimConfig | None = None, bounds: Sequence[float] = (-50, 50, -50, 50)) -> World:
+    """A world with no walls at all."""
+    return World(walls=np.zeros((0, 4)), bounds=np.asarray(bounds, dtype=float), sim=sim or SimConfig())
+
+
+def room_world(half_x: float, half_y: float, sim: SimConfig | None = None) -> World:
+    """An axis-aligned closed room x ∈ [−half_x, half_x], y ∈ [−half_y, half_y]."""
+    w, h = half_x, half_y
+    walls = np.array([(-w, -h, w, -h), (w, -h, w, h), (w, h, -w, h), (-w, h, -w, -h)], dtype=float)
+    return World(walls=walls, bounds=np.array([-w, w, -h, h]), sim=sim or SimConfig())
+
+
+def make_state(
+    robot: Sequence[float],
+    goal: Sequence[float] = (0.0, 0.0),
+    humans: Sequence[dict[str, Any]] = (),
+) -> State:
+    """A single-copy state built by hand.
+
+    Each human is a dict with ``pos`` and optional ``goal`` (default: its position),
+    ``waypoints`` (list of points before the goal), ``vel``, ``radius`` (0.6), ``vpref`` (0.6),
+    ``status`` (WALKING), ``delay`` (0) and ``wait_for`` (indices).
+    """
+    n = len(humans)
+    wps_list = []
+    for h in humans:
+        g = h.get("goal", h["pos"])
+        wps_list.append([*h.get("waypoints", ()), g])
+    w_max = max((len(w) for w in wps_list), default=1)
+    wps = np.zeros((1, n, w_max, 2))
+    n_wp = np.zeros((1, n), dtype=np.int64)
+    for i, pts in enumerate(wps_list):
+        wps[0, i, : len(pts)] = pts
+        wps[0, i, len(pts) :] = pts[-1]
+        n_wp[0, i] = len(pts)
+    pos = np.array([h["pos"] for h in humans], dtype=float).reshape(1, n, 2)
+    wait = np.zeros((1, n, n), dtype=np.int64)
+    for i, h in enumerate(humans):
+        for j in h.get("wait_for", ()):
+            wait[0, i, j] = 1
+    r = np.asarray(robot, dtype=float).reshape(1, 3)
+    return State(
+        robot=r.copy(),
+        command=np.zeros((1, 2)),
+        goal=np.asarray(goal, dtype=float).reshape(1, 2),
+        start=r[:, :2].copy(),
+        t=np.zeros(1),
+        path_length=np.zeros(1),
+        collided=np.zeros(1, dtype=np.bool_),
+        reached=np.zeros(1, dtype=np.bool_),
+        clearance=np.full(1, np.inf),
+        wall_clearance=np.full(1, np.inf),
+        h_pos=pos,
+        h_vel=np.array([h.get("vel", (0.0, 0.0)) for h in humans], dtype=float).reshape(1, n, 2),
+        h_radius=np.array([h.get("radius", 0.6) for h in humans], dtype=float).reshape(1, n),
+        h_vpref=np.array([h.get("vpref", 0.6) for h in humans], dtype=float).reshape(1, n),
+        h_waypoints=wps,
+        h_n_waypoints=n_wp,
+        h_wp_index=np.zeros((1, n), dtype=np.int64),
+        h_status=np.array([h.get("status", WALKING) for h in humans], dtype=np.int8).reshape(1, n),
+        h_delay=np.array([h.get("delay", 0.0) for h in humans], dtype=float).reshape(1, n),
+        h_wait_for=wait,
+        h_home=pos.copy(),
+    )
+
+
+def concat_states(states: Sequence[State]) -> State:
+    """Stack several states (same number of humans and waypoints) along the batch axis."""
+    return State(
+        **{
+            f.name: np.concatenate([getattr(s, f.name) for s in states], axis=0)
+            for f in dataclasses.fields(State)
+        }
+    )
+
+
+def states_equal(a: State, b: State) -> bool:
+    """Exact equality of every array of two states."""
+    return all(
+        np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(State)
+    )
+
+
+def wall_distances(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Distances ``(..., M)`` from points ``(..., 2)`` to every wall segment ``(M, 4)``."""
+    p = np.asarray(points, dtype=float)[..., None, :]
+    a = walls[:, :2]
+    e = walls[:, 2:] - a
+    ll = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
+    s = np.clip(((p - a) * e).sum(-1) / ll, 0.0, 1.0)
+    closest = a + s[..., None] * e
+    return np.linalg.norm(p - closest, axis=-1)
+
+
+def assert_house_message(msg: str, *needles: str) -> None:
+    """Every user-facing error says what was expected, what was received and how to fix it."""
+    for word in ("expected", "received", "fix"):
+        assert word in msg, f"{word!r} missing from error message: {msg}"
+    for needle in needles:
+        assert needle in msg, f"{needle!r} missing from error message: {msg}"
+
+
+def angle_diff(a: float, b: float) -> float:
+    """Smallest absolute difference of two angles [rad]."""
+    d = (a - b) % (2 * math.pi)
+    return min(d, 2 * math.pi - d)
