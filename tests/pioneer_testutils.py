@@ -13,6 +13,7 @@ from pioneer.sim.humans import WALKING
 from pioneer.sim.world import SimConfig, State, World
 
 __all__ = [
+    "angle_diff",
     "assert_house_message",
     "concat_states",
     "make_state",
@@ -25,7 +26,9 @@ __all__ = [
 
 def open_world(sim: SimConfig | None = None, bounds: Sequence[float] = (-50, 50, -50, 50)) -> World:
     """A world with no walls at all."""
-    return World(walls=np.zeros((0, 4)), bounds=np.asarray(bounds, dtype=float), sim=sim or SimConfig())
+    return World(
+        walls=np.zeros((0, 4)), bounds=np.asarray(bounds, dtype=float), sim=sim or SimConfig()
+    )
 
 
 def room_world(half_x: float, half_y: float, sim: SimConfig | None = None) -> World:

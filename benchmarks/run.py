@@ -1,0 +1,874 @@
+"""PioneeR performance benchmarks (``make bench`` → ``.venv/bin/python benchmarks/run.py``).
+
+Every benchmark is warmed up first (numba compilation and cache loading are excluded), then
+timed with :func:`time.perf_counter` over repeated runs. The table shows medians and
+interquartile ranges; ``benchmarks/results/latest.json`` gets the same numbers plus the
+machine description and a timestamp (written atomically: temp file + ``os.replace``).
+
+    .venv/bin/python benchmarks/run.py                 # everything (≈ 1 minute)
+    .venv/bin/python benchmarks/run.py --quick         # fewer repeats
+    .venv/bin/python benchmarks/run.py --only env_step # one benchmark (others kept in the JSON)
+
+Benchmarks and targets (docs/performance.md explains them):
+
+- ``env_step``            Gymnasium env steps/s, raw and ``gym.make``-wrapped   >= 5,000 /s
+- ``pysocialforce_step``  the same scene in the ``pysocialforce`` package, and ours/theirs
+- ``raycast_batch``       ``cast_rays`` for 1,200 poses x 72 beams              <= 2 ms
+- ``world_step_batch``    ``step`` on 120 copies x 10 steps of 0.3 s            <= 3 ms
+- ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import datetime
+import gc
+import importlib.metadata
+import json
+import logging
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numba
+import numpy as np
+
+import pioneer
+from pioneer.sim import (
+    ElevatorLayout,
+    State,
+    cast_rays,
+    get_scenario,
+    observation_from_ranges,
+    observe,
+    sample_state,
+    scan,
+    step,
+)
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+DEFAULT_OUTPUT = HERE / "results" / "latest.json"
+ENV_ID = "pioneer/ElevatorHRRL-v0"
+SCENARIO = "hr-rl"
+SEED = 20240601  # every random draw below comes from np.random.default_rng(SEED + k)
+SCHEMA = 1
+
+log = logging.getLogger("pioneer.bench")
+
+
+# --------------------------------------------------------------------------------------------
+# Statistics and timing
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """Repeat counts and work sizes (``--quick`` shrinks the repeats, never the work)."""
+
+    env_steps: int = 2000  # env steps per timed run
+    env_repeats: int = 15
+    psf_steps: int = 1000  # pysocialforce steps per timed run
+    psf_repeats: int = 10
+    raycast_repeats: int = 200
+    batch_repeats: int = 60
+    breakdown_calls: int = 2000  # calls per run in the per-step breakdown
+    breakdown_repeats: int = 7
+    memory_repeats: int = 3
+
+
+FULL = Plan()
+QUICK = Plan(
+    env_repeats=5,
+    psf_repeats=3,
+    raycast_repeats=50,
+    batch_repeats=15,
+    breakdown_repeats=3,
+    memory_repeats=1,
+)
+
+
+def summarize(samples: list[float] | np.ndarray, unit: str) -> dict[str, Any]:
+    """Median, quartiles and IQR of a list of per-run measurements."""
+    a = np.asarray(samples, dtype=np.float64)
+    q1, med, q3 = np.percentile(a, [25.0, 50.0, 75.0])
+    return {
+        "median": float(med),
+        "q1": float(q1),
+        "q3": float(q3),
+        "iqr": float(q3 - q1),
+        "min": float(a.min()),
+        "max": float(a.max()),
+        "n": int(a.size),
+        "unit": unit,
+    }
+
+
+def time_runs(
+    run: Callable[[Any], object],
+    repeats: int,
+    setup: Callable[[], Any] | None = None,
+    warmup: int = 1,
+) -> list[float]:
+    """Seconds per call of ``run(setup())``; ``setup`` and the warm-up calls are untimed."""
+    for _ in range(warmup):
+        run(setup() if setup is not None else None)
+    out = []
+    for _ in range(repeats):
+        arg = setup() if setup is not None else None
+        gc.collect()
+        t0 = time.perf_counter()
+        run(arg)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def metric(
+    samples: list[float] | np.ndarray,
+    unit: str,
+    target: tuple[str, float] | None = None,
+) -> dict[str, Any]:
+    """A summarized metric with an optional target ``(">=" | "<=" | "<", value)``."""
+    m = summarize(samples, unit)
+    if target is not None:
+        op, value = target
+        med = m["median"]
+        ok = {">=": med >= value, "<=": med <= value, "<": med < value}[op]
+        m["target"] = f"{op} {value:g} {unit}"
+        m["passed"] = bool(ok)
+    return m
+
+
+# --------------------------------------------------------------------------------------------
+# Shared scene
+
+
+def elevator_setup(seed: int) -> tuple[Any, Any, State]:
+    """The HR-RL scenario, its world and one seeded initial state (3 humans)."""
+    scenario = get_scenario(SCENARIO)
+    world = scenario.world()
+    state = sample_state(scenario, np.random.default_rng(seed))
+    return scenario, world, state
+
+
+def seeded_actions(space: gym.spaces.Box, n: int, seed: int) -> np.ndarray:
+    """A fixed action sequence drawn uniformly from the action box, shape ``(n, 2)``."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(space.low, space.high, size=(n, 2)).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# 1. env_step
+
+
+def _env_rollout(env: gym.Env, actions: np.ndarray) -> int:
+    """Step through ``actions``, resetting on termination/truncation; returns #resets."""
+    resets = 0
+    for a in actions:
+        _, _, terminated, truncated, _ = env.step(a)
+        if terminated or truncated:
+            env.reset()
+            resets += 1
+    return resets
+
+
+def bench_env_step(plan: Plan) -> dict[str, Any]:
+    """Steps/s of the Gymnasium env, raw and wrapped, plus a per-step cost breakdown."""
+    metrics: dict[str, Any] = {}
+    info: dict[str, Any] = {}
+    for label, make in (
+        ("raw", lambda: gym.make(ENV_ID).unwrapped),
+        ("wrapped", lambda: gym.make(ENV_ID)),
+    ):
+        env = make()
+        actions = seeded_actions(env.action_space, plan.env_steps, SEED + 1)
+        resets: list[int] = []
+
+        def setup(env: gym.Env = env) -> gym.Env:
+            env.reset(seed=SEED)  # identical work in every run
+            return env
+
+        def run(e: gym.Env, actions: np.ndarray = actions, resets: list[int] = resets) -> None:
+            resets.append(_env_rollout(e, actions))
+
+        secs = time_runs(run, plan.env_repeats, setup=setup, warmup=1)
+        metrics[f"steps_per_s_{label}"] = metric(
+            plan.env_steps / np.asarray(secs), "steps/s", (">=", 5000.0)
+        )
+        info[f"resets_per_run_{label}"] = resets[-1]
+        info[f"wrappers_{label}"] = str(env)
+        env.close()
+    info["steps_per_run"] = plan.env_steps
+    metrics.update(_env_breakdown(plan))
+    return {"metrics": metrics, "info": info}
+
+
+def _env_breakdown(plan: Plan) -> dict[str, Any]:
+    """µs per call of the pieces of one env step (B = 1), to locate Python overhead."""
+    n = plan.breakdown_calls
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=SEED)
+    world = env.world
+    s0: State = env.state
+    u = np.array([[0.4, 0.3]])
+    lid = world.sim.lidar
+    circles = np.concatenate(
+        [s0.h_pos, np.where(s0.humans_present, s0.h_radius, 0.0)[..., None]], axis=-1
+    )
+    ranges = scan(world, s0)
+    gb = np.zeros(1)
+    actions = seeded_actions(env.action_space, n, SEED + 1)
+
+    def env_steps(_: object) -> None:
+        _env_rollout(env, actions)
+
+    def world_steps(_: object) -> None:
+        s = s0
+        for _ in range(n):
+            s = step(world, s, u)
+
+    def observes(_: object) -> None:
+        for _ in range(n):
+            observe(world, s0)
+
+    def raycasts(_: object) -> None:
+        for _ in range(n):
+            cast_rays(s0.robot, circles, world.walls, lid.n_beams, lid.max_range)
+
+    def obs_from_ranges(_: object) -> None:
+        for _ in range(n):
+            observation_from_ranges(ranges, gb, lid)
+
+    parts: dict[str, Callable[[object], None]] = {
+        "env_step_raw": env_steps,
+        "world_step_b1": world_steps,
+        "observe_b1": observes,
+        "cast_rays_b1": raycasts,
+        "observation_from_ranges_b1": obs_from_ranges,
+    }
+    kernel = _step_kernel_runner(world, s0, u, n)
+    if kernel is not None:
+        parts["step_kernel_b1"] = kernel
+    out = {}
+    for name, fn in parts.items():
+        env.reset(seed=SEED)
+        secs = time_runs(fn, plan.breakdown_repeats, warmup=1)
+        out[f"us_per_call_{name}"] = metric(np.asarray(secs) / n * 1e6, "us")
+    env.close()
+    return out
+
+
+def _step_kernel_args(world: Any, s: State, u: np.ndarray, dt: float, n_sub: int) -> tuple:
+    """Arguments of the private numba kernel behind ``pioneer.sim.world.step`` (diagnostic)."""
+    return (
+        s.robot,
+        u,
+        s.goal,
+        s.t,
+        s.path_length,
+        s.collided,
+        s.reached,
+        s.clearance,
+        s.wall_clearance,
+        s.h_pos,
+        s.h_vel,
+        s.h_radius,
+        s.h_vpref,
+        s.h_waypoints,
+        s.h_n_waypoints,
+        s.h_wp_index,
+        s.h_status,
+        s.h_delay,
+        s.h_wait_for,
+        s.h_home,
+        world.walls,
+        world.bounds,
+        world.sfm_params,
+        world.sim.robot.radius,
+        world.sim.goal_tolerance,
+        dt,
+        n_sub,
+    )
+
+
+def _step_kernel_runner(
+    world: Any, s0: State, u: np.ndarray, n: int, dt: float | None = None
+) -> Callable[[object], None] | None:
+    """``n`` in-place calls of the bare step kernel, or None if its signature changed."""
+    try:
+        from pioneer.sim.world import _step_kernel
+    except ImportError:
+        return None
+    h_dt = world.sim.dt if dt is None else dt
+    n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
+    uc = np.ascontiguousarray(u, dtype=np.float64)
+
+    def run(_: object) -> None:
+        args = _step_kernel_args(world, s0.copy(), uc, h_dt, n_sub)
+        for _ in range(n):
+            _step_kernel(*args)
+
+    try:
+        run(None)
+    except Exception as exc:  # the kernel is private: skip the diagnostic if it moved
+        log.warning("step-kernel diagnostic skipped: %s", exc)
+        return None
+    return run
+
+
+# --------------------------------------------------------------------------------------------
+# 2. pysocialforce_step
+
+# agent_radius stays at their default 0.35 m: it only offsets their obstacle force (their
+# ped-ped force has no body radius), and with our 0.6 m all three pedestrians jam against the
+# door posts instead of walking through; the cost per step is the same within noise.
+PSF_CONFIG = """\
+# pysocialforce reads these top-level keys in PedState / EnvState.
+step_width = 0.1      # [s] same Δt as the pioneer env
+agent_radius = 0.35   # [m] their default (see above)
+resolution = 10.0     # obstacle samples per metre (their default)
+
+[scene]
+enable_group = false  # social force only: no group forces
+"""
+
+
+@contextlib.contextmanager
+def _quarantined_logging_and_cwd() -> Iterator[Path]:
+    """Run in a temporary cwd and undo any change to the root logger afterwards.
+
+    ``pysocialforce.utils.logging`` sets the root logger to DEBUG and attaches a stream
+    handler and a ``FileHandler("file.log")`` in the current directory at import time.
+    """
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
+    disabled = root.manager.disable
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-psf-") as tmp:
+        os.chdir(tmp)
+        logging.disable(logging.INFO)  # silence DEBUG chatter (numba, matplotlib) meanwhile
+        try:
+            yield Path(tmp)
+        finally:
+            os.chdir(cwd)
+            for h in list(root.handlers):
+                if h not in handlers:
+                    root.removeHandler(h)
+                    h.close()
+            root.setLevel(level)
+            logging.disable(disabled)
+
+
+def _import_pysocialforce() -> Any:
+    with _quarantined_logging_and_cwd():
+        import pysocialforce
+
+    return pysocialforce
+
+
+def _psf_scene(state: State, walls: np.ndarray) -> tuple[np.ndarray, list[tuple]]:
+    """pysocialforce state ``(N, 6)`` and obstacles from a pioneer state and wall list.
+
+    State rows are ``(x, y, vx, vy, goal_x, goal_y)``; pysocialforce has no waypoints, so
+    each pedestrian heads straight for its final goal (through the door) and starts at its
+    preferred speed (their max speed is 1.3 x the initial speed, like our speed cap).
+    Obstacles are ``(x_start, x_end, y_start, y_end)`` (scene.py: EnvState.obstacles), not
+    our ``(x1, y1, x2, y2)``.
+    """
+    pos = state.h_pos[0]
+    n = pos.shape[0]
+    goal = state.h_waypoints[0, np.arange(n), state.h_n_waypoints[0] - 1]
+    d = goal - pos
+    e = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    vel = e * state.h_vpref[0][:, None]
+    psf_state = np.column_stack([pos, vel, goal]).astype(np.float64)
+    obstacles = [(x1, x2, y1, y2) for x1, y1, x2, y2 in np.asarray(walls).tolist()]
+    return psf_state, obstacles
+
+
+def bench_pysocialforce_step(plan: Plan, ours: dict[str, Any] | None) -> dict[str, Any]:
+    """Steps/s of the same 3-pedestrian elevator scene in ``pysocialforce`` (no LiDAR)."""
+    info: dict[str, Any] = {"steps_per_run": plan.psf_steps}
+    try:
+        version = importlib.metadata.version("pysocialforce")
+    except importlib.metadata.PackageNotFoundError:
+        version = None
+    info["pysocialforce_version"] = version
+    try:
+        psf = _import_pysocialforce()
+        scenario, _, state = elevator_setup(SEED + 2)
+        psf_state, obstacles = _psf_scene(state, np.asarray(scenario.walls))
+        with tempfile.TemporaryDirectory(prefix="pioneer-bench-psf-") as tmp:
+            cfg = Path(tmp) / "bench.toml"
+            cfg.write_text(PSF_CONFIG)
+
+            def setup() -> Any:
+                return psf.Simulator(
+                    psf_state.copy(), groups=None, obstacles=obstacles, config_file=str(cfg)
+                )
+
+            def run(sim: Any) -> None:
+                sim.step(plan.psf_steps)
+
+            secs = time_runs(run, plan.psf_repeats, setup=setup, warmup=1)
+            last = setup().step(plan.psf_steps)
+            info["final_positions"] = np.round(last.peds.pos(), 3).tolist()
+            info["forces"] = [type(f).__name__ for f in last.forces]
+    except Exception as exc:  # report why instead of inventing a number
+        reason = f"{type(exc).__name__}: {exc}"
+        log.warning("pysocialforce benchmark unavailable: %s", reason)
+        info["status"] = "unavailable"
+        info["reason"] = reason
+        return {"metrics": {}, "info": info}
+    theirs = plan.psf_steps / np.asarray(secs)
+    metrics: dict[str, Any] = {"steps_per_s_pysocialforce": metric(theirs, "steps/s")}
+    med_theirs = float(np.median(theirs))
+    if ours:
+        em = ours.get("metrics", {})
+        for key, label in (
+            ("steps_per_s_raw", "ratio_env_raw_over_psf"),
+            ("steps_per_s_wrapped", "ratio_env_wrapped_over_psf"),
+        ):
+            if key in em:
+                info[label] = em[key]["median"] / med_theirs
+        ws = em.get("us_per_call_world_step_b1")
+        if ws:
+            info["ratio_world_step_b1_over_psf"] = (1e6 / ws["median"]) / med_theirs
+    info["status"] = "ok"
+    return {"metrics": metrics, "info": info}
+
+
+# --------------------------------------------------------------------------------------------
+# 3. raycast_batch
+
+
+def elevator_poses(n: int, seed: int, margin: float) -> np.ndarray:
+    """``n`` robot poses (x, y, θ): half in the lobby, half in the cabin, ``margin`` off walls."""
+    lay = ElevatorLayout()
+    rng = np.random.default_rng(seed)
+    n_lobby = n // 2
+    n_cabin = n - n_lobby
+    lobby = np.column_stack(
+        [
+            rng.uniform(-lay.lobby_width / 2 + margin, lay.lobby_width / 2 - margin, n_lobby),
+            rng.uniform(-lay.lobby_depth + margin, -margin, n_lobby),
+        ]
+    )
+    cabin = np.column_stack(
+        [
+            rng.uniform(-lay.cabin_width / 2 + margin, lay.cabin_width / 2 - margin, n_cabin),
+            rng.uniform(margin, lay.cabin_depth - margin, n_cabin),
+        ]
+    )
+    xy = np.concatenate([lobby, cabin])
+    theta = rng.uniform(-math.pi, math.pi, n)
+    return np.ascontiguousarray(np.column_stack([xy, theta]))
+
+
+def bench_raycast_batch(plan: Plan) -> dict[str, Any]:
+    """``cast_rays`` for 1,200 poses x 72 beams, 3 humans per pose."""
+    n_poses = 1200
+    scenario, world, state = elevator_setup(SEED + 3)
+    lid = scenario.sim.lidar
+    poses = elevator_poses(n_poses, SEED + 4, scenario.sim.robot.radius)
+    one = np.concatenate(
+        [state.h_pos, np.where(state.humans_present, state.h_radius, 0.0)[..., None]], axis=-1
+    )  # (1, 3, 3)
+    circles = np.ascontiguousarray(np.broadcast_to(one, (n_poses, *one.shape[1:])))
+    walls = world.walls
+    out = cast_rays(poses, circles, walls, lid.n_beams, lid.max_range)
+    assert out.shape == (n_poses, lid.n_beams), out.shape
+
+    def run(_: object) -> None:
+        cast_rays(poses, circles, walls, lid.n_beams, lid.max_range)
+
+    secs = np.asarray(time_runs(run, plan.raycast_repeats, warmup=3))
+    rays = n_poses * lid.n_beams
+    return {
+        "metrics": {
+            "ms_per_call": metric(secs * 1e3, "ms", ("<=", 2.0)),
+            "ns_per_ray": metric(secs / rays * 1e9, "ns"),
+        },
+        "info": {
+            "poses": n_poses,
+            "beams": lid.n_beams,
+            "walls": int(walls.shape[0]),
+            "circles_shape": list(circles.shape),
+            "mean_range_m": float(out.mean()),
+        },
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# 4. world_step_batch
+
+
+def concat_states(states: list[State]) -> State:
+    """One state holding every copy of ``states`` (B = ΣB_i)."""
+    return State(
+        **{
+            f.name: np.concatenate([getattr(s, f.name) for s in states])
+            for f in dataclasses.fields(State)
+        }
+    )
+
+
+def bench_world_step_batch(plan: Plan) -> dict[str, Any]:
+    """``step`` on 120 copies x 10 steps of 0.3 s (the teacher's rollout), then ``observe``."""
+    n_copies, n_steps, dt = 120, 10, 0.3
+    scenario, world, state = elevator_setup(SEED + 5)
+    batch = state.repeat(n_copies)
+    rng = np.random.default_rng(SEED + 6)
+    robot = scenario.sim.robot
+    cmds = rng.uniform(robot.command_low, robot.command_high, size=(n_copies, 2))
+    rollout: list[State] = []
+
+    def run(_: object) -> None:
+        s = batch
+        rollout.clear()
+        for _ in range(n_steps):
+            s = step(world, s, cmds, dt=dt)
+            rollout.append(s)
+
+    secs = np.asarray(time_runs(run, plan.batch_repeats, warmup=2))
+    n_sub = max(1, math.ceil(dt / scenario.sim.social_force.max_substep - 1e-9))
+    metrics: dict[str, Any] = {
+        "ms_10_steps": metric(secs * 1e3, "ms", ("<=", 3.0)),
+        "ns_per_copy_substep": metric(secs / (n_copies * n_steps * n_sub) * 1e9, "ns"),
+    }
+    kernel = _step_kernel_runner(world, batch, cmds, n_steps, dt=dt)
+    if kernel is not None:
+        ksecs = np.asarray(time_runs(kernel, plan.batch_repeats, warmup=1))
+        metrics["ms_10_steps_kernel_only"] = metric(ksecs * 1e3, "ms")
+    states = list(rollout)
+    big = concat_states(states)
+
+    def observe_each(_: object) -> None:
+        for s in states:
+            observe(world, s)
+
+    def observe_once(_: object) -> None:
+        observe(world, big)
+
+    metrics["ms_observe_10x120"] = metric(
+        np.asarray(time_runs(observe_each, plan.batch_repeats, warmup=2)) * 1e3, "ms"
+    )
+    metrics["ms_observe_1x1200"] = metric(
+        np.asarray(time_runs(observe_once, plan.batch_repeats, warmup=2)) * 1e3, "ms"
+    )
+    final = states[-1]
+    return {
+        "metrics": metrics,
+        "info": {
+            "copies": n_copies,
+            "steps": n_steps,
+            "dt_s": dt,
+            "substeps_per_step": n_sub,
+            "observed_states": int(big.batch_size),
+            "collided_copies": int(final.collided.sum()),
+            "final_time_s": float(final.t[0]),
+        },
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# 5. memory
+
+MEMORY_CHILD = """
+import json, resource, sys
+rss_start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+import numpy as np
+import gymnasium as gym
+import pioneer
+rss_import = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+env = gym.make({env_id!r})
+rng = np.random.default_rng({seed})
+actions = rng.uniform(env.action_space.low, env.action_space.high, size=({n}, 2))
+env.reset(seed={seed})
+for a in actions.astype(np.float32):
+    _, _, terminated, truncated, _ = env.step(a)
+    if terminated or truncated:
+        env.reset()
+env.close()
+rss_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+hwm = None
+try:
+    with open("/proc/self/status") as f:
+        hwm = next(int(ln.split()[1]) for ln in f if ln.startswith("VmHWM:"))
+except (OSError, StopIteration):
+    pass
+heavy = sorted(m for m in ("torch", "matplotlib") if m in sys.modules)
+print(json.dumps({{"rss_start_kb": rss_start, "rss_import_kb": rss_import, "rss_peak_kb": rss_peak,
+                  "vm_hwm_kb": hwm, "heavy": heavy, "n_modules": len(sys.modules)}}))
+assert not heavy, f"heavy modules imported: {{heavy}}"
+"""
+
+
+# Linux carries the RSS high-water mark of the address space a process replaces across
+# execve into ru_maxrss, so a child spawned straight from this (large) benchmark process would
+# report at least our own RSS. A bare ``python -S`` launcher (≈ 10 MB) spawns the real child.
+MEMORY_LAUNCHER = (
+    "import subprocess, sys; "
+    "sys.exit(subprocess.run([sys.executable, '-c', sys.argv[1]]).returncode)"
+)
+
+
+def bench_memory(plan: Plan) -> dict[str, Any]:
+    """Peak RSS (ru_maxrss) of a fresh interpreter that imports pioneer and runs 1,000 steps."""
+    n_steps = 1000
+    code = MEMORY_CHILD.format(env_id=ENV_ID, seed=SEED + 7, n=n_steps)
+    peaks, imports, starts, hwms, heavy_all, n_modules = [], [], [], [], set(), []
+    for _ in range(plan.memory_repeats):
+        proc = subprocess.run(
+            [sys.executable, "-S", "-c", MEMORY_LAUNCHER, code],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+        if not lines:
+            raise RuntimeError(f"memory child failed ({proc.returncode}): {proc.stderr[-2000:]}")
+        rec = json.loads(lines[-1])
+        # ru_maxrss is in KiB on Linux (bytes on macOS).
+        scale = 1.0 / (1024 * 1024) if sys.platform == "darwin" else 1.0 / 1024
+        peaks.append(rec["rss_peak_kb"] * scale)
+        imports.append(rec["rss_import_kb"] * scale)
+        starts.append(rec["rss_start_kb"] * scale)
+        if rec["vm_hwm_kb"] is not None:
+            hwms.append(rec["vm_hwm_kb"] / 1024)
+        heavy_all.update(rec["heavy"])
+        n_modules.append(rec["n_modules"])
+    peak = metric(peaks, "MB", ("<", 300.0))
+    heavy = sorted(heavy_all)
+    if heavy:
+        peak["passed"] = False
+    return {
+        "metrics": {
+            "peak_rss_mb": peak,
+            "rss_after_import_mb": metric(imports, "MB"),
+            **({"vm_hwm_mb": metric(hwms, "MB")} if hwms else {}),
+        },
+        "info": {
+            "env_steps": n_steps,
+            "ru_maxrss_at_child_start_mb": float(np.median(starts)),
+            "torch_imported": "torch" in heavy,
+            "matplotlib_imported": "matplotlib" in heavy,
+            "modules_loaded": int(np.median(n_modules)),
+        },
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Driver
+
+BENCHMARKS = ("env_step", "pysocialforce_step", "raycast_batch", "world_step_batch", "memory")
+
+
+def machine_info() -> dict[str, Any]:
+    """What the numbers were measured on."""
+    cpu_model = None
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu_model = line.split(":", 1)[1].strip()
+                break
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+
+    def _version(dist: str) -> str | None:
+        try:
+            return importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {
+        "cpu_count": os.cpu_count(),
+        "cpu_affinity": affinity,
+        "cpu_model": cpu_model,
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+        "gymnasium": gym.__version__,
+        "pioneer": pioneer.__version__,
+        "pysocialforce": _version("pysocialforce"),
+        "numba_threading_layer_env": os.environ.get("NUMBA_THREADING_LAYER"),
+    }
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
+    """Run the selected benchmarks in a fixed order; failures are recorded, not raised."""
+    results: dict[str, dict[str, Any]] = {}
+    for name in BENCHMARKS:
+        if name not in names:
+            continue
+        print(f"[bench] {name} …", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        try:
+            if name == "env_step":
+                res = bench_env_step(plan)
+            elif name == "pysocialforce_step":
+                ours = results.get("env_step") or _previous_result("env_step")
+                res = bench_pysocialforce_step(plan, ours)
+            elif name == "raycast_batch":
+                res = bench_raycast_batch(plan)
+            elif name == "world_step_batch":
+                res = bench_world_step_batch(plan)
+            else:
+                res = bench_memory(plan)
+        except Exception as exc:
+            log.exception("benchmark %s failed", name)
+            res = {"metrics": {}, "info": {"status": "error", "reason": repr(exc)}}
+        res["timestamp"] = _now()
+        res["wall_time_s"] = round(time.perf_counter() - t0, 2)
+        res["repeats"] = {m: v["n"] for m, v in res["metrics"].items()}
+        res["load_average"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+        results[name] = res
+    return results
+
+
+_PREVIOUS: dict[str, Any] = {}
+
+
+def _previous_result(name: str) -> dict[str, Any] | None:
+    return _PREVIOUS.get("benchmarks", {}).get(name)
+
+
+def _fmt(v: float) -> str:
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    if abs(v) >= 1000:
+        return f"{v:,.0f}"
+    if abs(v) >= 10:
+        return f"{v:.1f}"
+    return f"{v:.3g}"
+
+
+def print_table(results: dict[str, dict[str, Any]]) -> None:
+    """Medians, IQRs and pass/fail of every metric."""
+    rows = [("benchmark", "metric", "median", "IQR", "unit", "target", "status")]
+    notes: list[str] = []
+    for name, res in results.items():
+        for mname, m in res["metrics"].items():
+            status = "" if "passed" not in m else ("PASS" if m["passed"] else "FAIL")
+            rows.append(
+                (
+                    name,
+                    mname,
+                    _fmt(m["median"]),
+                    _fmt(m["iqr"]),
+                    m["unit"],
+                    m.get("target", ""),
+                    status,
+                )
+            )
+        info = res.get("info", {})
+        for key, value in info.items():
+            if key.startswith("ratio_"):
+                rows.append((name, key, _fmt(value), "", "x", "", ""))
+        if info.get("status") in ("error", "unavailable"):
+            rows.append((name, info["status"].upper(), "-", "", "", "", "see below"))
+            notes.append(f"{name}: {info['status']}: {info.get('reason', '')}")
+    widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
+    for i, row in enumerate(rows):
+        print("  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)).rstrip())
+        if i == 0:
+            print("  ".join("-" * w for w in widths))
+    for note in notes:
+        print(note)
+
+
+def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
+    """Write JSON to a temp file in the same directory, fsync, then ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(payload, f, indent=2, sort_keys=False)
+            f.write("\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repeats (smoke run)")
+    parser.add_argument(
+        "--only",
+        action="append",
+        choices=BENCHMARKS,
+        metavar="NAME",
+        help=f"run only this benchmark (repeatable): {', '.join(BENCHMARKS)}",
+    )
+    parser.add_argument(
+        "--output", type=Path, default=DEFAULT_OUTPUT, help="results JSON (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 if any target is missed"
+    )
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    names = list(args.only) if args.only else list(BENCHMARKS)
+    plan = QUICK if args.quick else FULL
+
+    if args.output.exists():
+        with contextlib.suppress(OSError, ValueError):
+            _PREVIOUS.update(json.loads(args.output.read_text()))
+
+    t0 = time.perf_counter()
+    results = run_benchmarks(names, plan)
+    elapsed = time.perf_counter() - t0
+
+    print()
+    print_table(results)
+    print(f"\n{len(results)} benchmark(s) in {elapsed:.1f} s ({'quick' if args.quick else 'full'})")
+
+    # Keep earlier results of benchmarks not run this time (each carries its own timestamp).
+    merged: dict[str, Any] = {}
+    if _PREVIOUS.get("schema") == SCHEMA:
+        merged.update(_PREVIOUS.get("benchmarks", {}))
+    merged.update(results)
+    payload = {
+        "schema": SCHEMA,
+        "timestamp": _now(),
+        "mode": "quick" if args.quick else "full",
+        "ran": names,
+        "elapsed_s": round(elapsed, 2),
+        "machine": machine_info(),
+        "benchmarks": {name: merged[name] for name in BENCHMARKS if name in merged},
+    }
+    write_json_atomic(args.output, payload)
+    print(f"results → {args.output}")
+
+    missed = [
+        f"{name}.{mname}"
+        for name, res in results.items()
+        for mname, m in res["metrics"].items()
+        if m.get("passed") is False
+    ]
+    if missed:
+        print("targets missed: " + ", ".join(missed))
+    return 1 if (args.strict and missed) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,332 @@
+"""Scenarios as data: elevator co-boarding, static study, validation and seeded sampling."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pioneer.errors import ConfigError, ScenarioError
+from pioneer.sim import (
+    ARRIVED,
+    WALKING,
+    ElevatorLayout,
+    HumanSpec,
+    Region,
+    ScenarioConfig,
+    StaticStudyLayout,
+    elevator_scenario,
+    get_scenario,
+    sample_state,
+    scenario_names,
+    static_study_scenario,
+)
+from pioneer_testutils import assert_house_message, states_equal, wall_distances
+
+ELEVATOR_NAMES = ["hr-rl", "hl-rr", "hr-rl-r03", "hl-rr-r03"]
+
+
+def test_scenario_names():
+    assert scenario_names() == sorted(["hl-rr", "hl-rr-r03", "hr-rl", "hr-rl-r03", "static"])
+    for name in scenario_names():
+        assert get_scenario(name).name == name
+    assert get_scenario("  HR-RL ").name == "hr-rl"
+
+
+def test_unknown_scenario_names_field_and_lists_names():
+    with pytest.raises(ScenarioError) as exc:
+        get_scenario("elevator-9000")
+    msg = str(exc.value)
+    assert_house_message(msg, "scenario", "elevator-9000")
+    for name in scenario_names():
+        assert name in msg
+    assert isinstance(exc.value, ConfigError)  # ScenarioError is a ConfigError
+
+
+def test_default_elevator_geometry_matches_spec():
+    cfg = get_scenario("hr-rl")
+    walls = np.asarray(cfg.walls)
+    assert cfg.bounds == (-2.0, 2.0, -1.3, 2.7)
+    # Door gap x ∈ [−0.9, 0.9] on y = 0; cabin x ∈ [−1.25, 1.25], y ∈ [0, 2.7].
+    assert (-2.0, 0.0, -0.9, 0.0) in cfg.walls
+    assert (0.9, 0.0, 2.0, 0.0) in cfg.walls
+    assert (-1.25, 2.7, 1.25, 2.7) in cfg.walls
+    # Nothing blocks the door line or the open lobby side.
+    door = wall_distances(np.column_stack([np.linspace(-0.85, 0.85, 35), np.zeros(35)]), walls)
+    assert door.min() > 0.04
+    far = wall_distances(np.column_stack([np.linspace(-1.9, 1.9, 39), np.full(39, -1.3)]), walls)
+    assert far.min() > 0.09
+    roles = [h.role for h in cfg.humans]
+    assert sorted(roles) == ["boarding", "boarding", "exiting"]
+    assert all(h.radius == 0.6 for h in cfg.humans)
+    assert all(h.radius == 0.3 for h in get_scenario("hr-rl-r03").humans)
+
+
+@pytest.mark.parametrize(("name", "side"), [("hr-rl", 1.0), ("hl-rr", -1.0)])
+def test_goal_and_spots_on_the_right_sides(name, side):
+    cfg = get_scenario(name)
+    # The robot's goal is in the opposite half of the cabin to the boarders' spots.
+    assert side * cfg.robot_goal.x[1] < 0
+    assert cfg.robot_goal.y[0] > 0
+    for h in cfg.humans:
+        if h.role == "boarding":
+            assert side * h.goal.center[0] > 0
+            assert h.goal.center[1] > 0
+    for seed in range(20):
+        state = sample_state(cfg, np.random.default_rng(seed))
+        assert side * state.goal[0, 0] < 0
+        assert 0.0 < state.goal[0, 1] < 2.7
+        assert abs(state.robot[0, 2] - math.pi / 2) <= 0.15 + 1e-12
+
+
+def test_mirror_images():
+    right, left = get_scenario("hr-rl"), get_scenario("hl-rr")
+
+    def segments(walls, sign=1.0):
+        return {frozenset({(sign * x1, y1), (sign * x2, y2)}) for x1, y1, x2, y2 in walls}
+
+    assert segments(right.walls, -1.0) == segments(left.walls)
+    assert right.robot_goal.mirrored() == left.robot_goal
+    for hr, hl in zip(right.humans, left.humans, strict=True):
+        assert hr.role == hl.role
+        if hr.role == "boarding":
+            assert hr.goal.mirrored() == hl.goal
+
+
+@pytest.mark.parametrize("name", [*ELEVATOR_NAMES, "static"])
+def test_sampled_states_are_collision_free_and_seeded(name):
+    cfg = get_scenario(name)
+    walls = np.asarray(cfg.walls, dtype=float)
+    gap = cfg.min_start_gap
+    r_r = cfg.sim.robot.radius
+    starts = []
+    for seed in range(30):
+        state = sample_state(cfg, np.random.default_rng(seed))
+        assert state.batch_size == 1
+        pos, rad = state.h_pos[0], state.h_radius[0]
+        rob = state.robot[0, :2]
+        assert wall_distances(rob, walls).min() >= r_r + gap - 1e-12
+        assert np.all(wall_distances(pos, walls).min(1) >= rad + gap - 1e-12)
+        assert np.all(np.linalg.norm(pos - rob, axis=1) >= rad + r_r + gap - 1e-12)
+        for i in range(len(pos)):
+            for j in range(i):
+                assert np.linalg.norm(pos[i] - pos[j]) >= rad[i] + rad[j] + gap - 1e-12
+        assert state.clearance[0] >= gap - 1e-12
+        assert state.wall_clearance[0] >= gap - 1e-12
+        assert not state.collided[0] and not state.reached[0]
+        assert np.all(state.h_vel == 0.0)
+        assert set(state.h_vpref[0]) <= {0.0, 0.5, 0.6, 0.7}
+        # Same seed → identical state.
+        assert states_equal(state, sample_state(cfg, np.random.default_rng(seed)))
+        starts.append(state.robot[0].copy())
+    if name != "static":
+        assert len({tuple(s) for s in starts}) == len(starts)  # seeds give different states
+    else:  # the static study only randomises the start x
+        assert len({s[0] for s in starts}) == len(starts)
+
+
+def test_sampled_state_structure():
+    cfg = get_scenario("hr-rl")
+    state = sample_state(cfg, np.random.default_rng(4))
+    roles = [h.role for h in cfg.humans]
+    ex = roles.index("exiting")
+    boarders = [i for i, r in enumerate(roles) if r == "boarding"]
+    assert state.h_status[0].tolist() == [WALKING] * 3
+    # Exiting: behind the door → in front of the door → the far lobby, where it is removed.
+    assert state.h_n_waypoints[0, ex] == 3
+    assert state.h_waypoints[0, ex, -1, 1] < -1.3
+    # Boarders wait for the exiting passenger; the second boarder waits for the first.
+    assert state.h_wait_for[0, boarders[0], ex] == 1
+    assert state.h_wait_for[0, boarders[1], boarders[0]] == 1
+    assert state.h_wait_for[0, ex].sum() == 0
+    assert np.all((state.h_delay[0, boarders] >= 0.5) & (state.h_delay[0, boarders] <= 1.5))
+    np.testing.assert_array_equal(state.h_home, state.h_pos)
+    np.testing.assert_array_equal(state.start[0], state.robot[0, :2])
+
+
+def test_static_study_scenario():
+    cfg = static_study_scenario()
+    assert cfg.bounds == (-2.0, 2.0, -3.0, 3.0)
+    state = sample_state(cfg, np.random.default_rng(0))
+    assert state.h_status[0, 0] == ARRIVED  # static human: an obstacle from t = 0
+    np.testing.assert_array_equal(state.h_pos[0, 0], [0.0, 0.0])
+    np.testing.assert_array_equal(state.goal[0], [0.0, 2.4])
+    assert state.robot[0, 1] == -2.4
+    assert abs(state.robot[0, 0]) <= 0.3
+    assert state.robot[0, 2] == math.pi / 2
+    wide = static_study_scenario(StaticStudyLayout(width=6.0, human_radius=0.3))
+    assert wide.bounds[:2] == (-3.0, 3.0)
+    assert wide.humans[0].radius == 0.3
+    with pytest.raises(ConfigError) as exc:
+        StaticStudyLayout(width=-1.0)
+    assert_house_message(str(exc.value), "width")
+
+
+@pytest.mark.parametrize(
+    "layout",
+    [
+        ElevatorLayout(n_boarding=4, n_exiting=2, human_radius=0.3),
+        ElevatorLayout(door_width=1.2, human_radius=0.3),
+        ElevatorLayout(cabin_width=3.0, cabin_depth=3.5, lobby_width=5.0, lobby_depth=2.0),
+        ElevatorLayout(n_boarding=0, n_exiting=0),
+        ElevatorLayout(n_boarding=1, boarders_queue=False, human_side="left"),
+    ],
+)
+def test_layout_variants_are_configuration(layout):
+    cfg = elevator_scenario(layout)
+    assert len(cfg.humans) == layout.n_boarding + layout.n_exiting
+    state = sample_state(cfg, np.random.default_rng(1))
+    assert state.n_humans == len(cfg.humans)
+    door = [w for w in cfg.walls if w[1] == 0.0 and w[3] == 0.0]
+    inner = sorted(abs(x) for w in door for x in (w[0], w[2]))[:2]
+    assert inner == pytest.approx([layout.door_width / 2] * 2)
+
+
+def test_elevator_layout_negative_door_width():
+    with pytest.raises(ConfigError) as exc:
+        ElevatorLayout(door_width=-1.0)
+    assert_house_message(str(exc.value), "door_width", "-1.0")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"door_width": 3.0}, "door_width"),  # wider than the cabin
+        ({"cabin_width": 5.0}, "cabin_width"),  # wider than the lobby
+        ({"human_side": "up"}, "human_side"),
+        ({"n_boarding": -1}, "n_boarding"),
+        ({"n_exiting": 1.5}, "n_exiting"),
+        ({"human_radius": 0.0}, "human_radius"),
+        ({"margin": -0.1}, "margin"),
+        ({"cabin_depth": math.inf}, "cabin_depth"),
+    ],
+)
+def test_elevator_layout_validation(kwargs, field):
+    with pytest.raises(ConfigError) as exc:
+        ElevatorLayout(**kwargs)
+    assert_house_message(str(exc.value), field)
+
+
+def test_door_narrower_than_robot():
+    with pytest.raises(ScenarioError) as exc:
+        elevator_scenario(ElevatorLayout(door_width=0.5))
+    assert_house_message(str(exc.value), "door_width")
+
+
+def _room_walls():
+    return ((-3, -3, 3, -3), (3, -3, 3, 3), (3, 3, -3, 3), (-3, 3, -3, -3))
+
+
+def _scenario(humans, robot_start=None, **kw):
+    return ScenarioConfig(
+        name="custom",
+        walls=_room_walls(),
+        bounds=(-3, 3, -3, 3),
+        robot_start=robot_start or Region(x=(-0.5, 0.5), y=(-2.0, -2.0)),
+        robot_goal=Region(x=(0.0, 0.0), y=(2.0, 2.0)),
+        robot_heading=(0.0, 0.0),
+        humans=tuple(humans),
+        **kw,
+    )
+
+
+def test_human_start_inside_wall_is_rejected():
+    inside = HumanSpec(
+        role="walking",
+        start=Region(x=(2.8, 3.2), y=(-0.2, 0.2)),  # straddles the wall x = 3
+        goal=Region(x=(0.0, 0.0), y=(0.0, 0.0)),
+    )
+    with pytest.raises(ScenarioError) as exc:
+        _scenario([inside])
+    assert_house_message(str(exc.value), "humans[0].start")
+
+
+def test_second_human_start_inside_wall_names_its_index():
+    ok = HumanSpec(role="a", start=Region(x=(0, 0), y=(0, 0)), goal=Region(x=(1, 1), y=(1, 1)))
+    bad = HumanSpec(role="b", start=Region(x=(-3, -3), y=(0, 0)), goal=Region(x=(1, 1), y=(1, 1)))
+    with pytest.raises(ScenarioError) as exc:
+        _scenario([ok, bad])
+    assert_house_message(str(exc.value), "humans[1].start")
+
+
+def test_robot_start_inside_wall_is_rejected():
+    with pytest.raises(ScenarioError) as exc:
+        _scenario([], robot_start=Region(x=(3.0, 3.0), y=(0.0, 0.0)))
+    assert_house_message(str(exc.value), "robot_start")
+
+
+def test_invalid_wait_for_is_rejected():
+    h = HumanSpec(
+        role="a", start=Region(x=(0, 0), y=(0, 0)), goal=Region(x=(1, 1), y=(1, 1)), wait_for=(0,)
+    )
+    with pytest.raises(ScenarioError) as exc:
+        _scenario([h])
+    assert_house_message(str(exc.value), "humans[0].wait_for")
+
+
+def test_bad_bounds_and_regions():
+    with pytest.raises(ScenarioError) as exc:
+        ScenarioConfig(
+            name="x",
+            walls=(),
+            bounds=(1, -1, 0, 1),
+            robot_start=Region(x=(0, 0), y=(0, 0)),
+            robot_goal=Region(x=(0, 0), y=(0, 0)),
+            robot_heading=(0, 0),
+            humans=(),
+        )
+    assert_house_message(str(exc.value), "bounds")
+    with pytest.raises(ConfigError) as exc:
+        Region(x=(1.0, 0.0), y=(0.0, 0.0))
+    assert_house_message(str(exc.value), "Region.x")
+    with pytest.raises(ConfigError) as exc:
+        HumanSpec(
+            role="a",
+            start=Region(x=(0, 0), y=(0, 0)),
+            goal=Region(x=(0, 0), y=(0, 0)),
+            v_pref_choices=(),
+        )
+    assert_house_message(str(exc.value), "v_pref_choices")
+
+
+def test_impossible_placement_raises():
+    # Two 1 m humans pinned to the same point: every draw overlaps.
+    h = HumanSpec(
+        role="a", start=Region(x=(0, 0), y=(0, 0)), goal=Region(x=(1, 1), y=(1, 1)), radius=1.0
+    )
+    cfg = _scenario([h, h])
+    with pytest.raises(ScenarioError) as exc:
+        sample_state(cfg, np.random.default_rng(0))
+    assert_house_message(str(exc.value), "initial state")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    x=st.tuples(st.floats(-5, 5), st.floats(0, 3)),
+    y=st.tuples(st.floats(-5, 5), st.floats(0, 3)),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_region_sample_and_mirror(x, y, seed):
+    reg = Region(x=(x[0], x[0] + x[1]), y=(y[0], y[0] + y[1]))
+    p = reg.sample(np.random.default_rng(seed))
+    assert reg.x[0] <= p[0] <= reg.x[1]
+    assert reg.y[0] <= p[1] <= reg.y[1]
+    m = reg.mirrored()
+    assert m.x == (-reg.x[1], -reg.x[0])
+    assert m.y == reg.y
+    assert m.mirrored() == reg
+    np.testing.assert_allclose(m.center, [-reg.center[0], reg.center[1]])
+
+
+def test_scenario_config_round_trips_through_dict():
+    for name in scenario_names():
+        cfg = get_scenario(name)
+        again = ScenarioConfig.from_dict(cfg.to_dict())
+        assert again == cfg
+        assert states_equal(
+            sample_state(cfg, np.random.default_rng(3)),
+            sample_state(again, np.random.default_rng(3)),
+        )
