@@ -19,15 +19,6 @@ from pioneer_testutils import assert_house_message
 
 IDS = ["pioneer/ElevatorHRRL-v0", "pioneer/ElevatorHLRR-v0", "pioneer/StaticStudy-v0"]
 
-TRUNC_BUG = (
-    "BUG: sim/env.py NavEnv.step computes `timeout = not (...) and new.t[0] >= limit`, which "
-    "is a numpy.bool_, so `truncated` is not a Python bool (check_env rejects it)"
-)
-INFO_BUG = (
-    "BUG: NavEnv info carries info['state'], a State dataclass with eq=False, so two runs with "
-    "the same seed and actions never compare equal (check_env step-determinism check fails)"
-)
-
 
 def test_ids_registered_on_import():
     assert set(ENV_IDS) == set(IDS)
@@ -36,13 +27,11 @@ def test_ids_registered_on_import():
 
 
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized:UserWarning")
-@pytest.mark.xfail(reason=f"{TRUNC_BUG}; {INFO_BUG}", strict=True)
 @pytest.mark.parametrize("env_id", IDS)
 def test_check_env_passes(env_id):
     check_env(gym.make(env_id).unwrapped)
 
 
-@pytest.mark.xfail(reason=TRUNC_BUG, strict=True)
 def test_step_returns_python_bools():
     env = NavEnv("static")
     env.reset(seed=0)
@@ -52,7 +41,6 @@ def test_step_returns_python_bools():
     assert type(truncated) is bool
 
 
-@pytest.mark.xfail(reason=INFO_BUG, strict=True)
 def test_step_info_equal_for_same_seed_and_action():
     env = NavEnv("hr-rl")
     infos = []
@@ -168,12 +156,6 @@ def test_nan_action_raises_command_error():
         env.step([0.1, np.inf])
 
 
-@pytest.mark.xfail(
-    reason="BUG: sim/env.py NavEnv.step reshapes the action with np.asarray(...).reshape(1, 2) "
-    "before validation, so a wrong-sized action raises numpy's bare ValueError ('cannot "
-    "reshape ...') instead of CommandError with expected/received/fix",
-    strict=True,
-)
 @pytest.mark.parametrize("action", [[0.1, 0.2, 0.3], [0.1]])
 def test_wrong_size_action_raises_command_error(action):
     env = NavEnv("hr-rl")

@@ -195,15 +195,6 @@ def test_humans_never_cross_walls(name):
     assert (state.h_status != WALKING).any()  # the episodes went somewhere
 
 
-SCRATCH_BUG = (
-    "BUG: world._step_kernel allocates scratch = np.empty((n_h, 3)) but humans.sfm_substep "
-    "uses 4 columns (wall_d = scratch[:, 3]); numba does not bounds-check, so wall_d[i] aliases "
-    "fx[i+1] (and the last human writes past the buffer): a human's hard-wall projection is "
-    "skipped whenever the next human's x-force exceeds its radius, and it sinks into walls"
-)
-
-
-@pytest.mark.xfail(reason=SCRATCH_BUG, strict=True)
 def test_wall_holds_while_another_human_accelerates():
     """Minimal case: the robot presses human 0 against the top wall while human 1 speeds up
     along +x. Human 0's body must stay out of the wall."""
@@ -224,7 +215,6 @@ def test_wall_holds_while_another_human_accelerates():
     assert worst >= -1e-6
 
 
-@pytest.mark.xfail(reason=SCRATCH_BUG, strict=True)
 def test_humans_never_cross_walls_with_robot_chasing_them():
     """The robot drives straight at the nearest human (pushing it around)."""
     cfg = get_scenario("hr-rl")

@@ -394,11 +394,6 @@ def test_goal_bearing_known_poses(heading, goal, expected):
     )
 
 
-@pytest.mark.xfail(
-    reason="BUG: robot.wrap_angle maps pi + 1 ulp to -pi, so a goal straight behind a robot "
-    "whose heading is -4.4e-16 gets phi_goal = -pi, outside (-pi, pi]",
-    strict=True,
-)
 def test_goal_straight_behind_with_tiny_negative_heading_reads_plus_pi():
     world = room_world(5.0, 5.0)
     state = make_state((0.0, 0.0, -float(np.spacing(np.pi))), goal=(-1.0, 0.0))

@@ -75,11 +75,6 @@ def test_wrap_angle_range_and_congruence(a):
     assert wrap_angle(w) == pytest.approx(w, abs=1e-12)  # idempotent
 
 
-@pytest.mark.xfail(
-    reason="BUG: robot.wrap_angle returns -pi (outside (-pi, pi]) for inputs one ulp above pi, "
-    "because (pi - a) % 2pi rounds up to exactly 2pi",
-    strict=True,
-)
 def test_wrap_angle_never_returns_minus_pi():
     a = float(np.nextafter(math.pi, 4.0))  # π + 1 ulp, e.g. atan2(+0, −1) − (−1e−16)
     assert wrap_angle(a) > -math.pi

@@ -243,7 +243,7 @@ class DensityReward:
 
     def _eval_cache(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         assert self.inducing_ is not None and self._w is not None
-        if getattr(self, "_u32", None) is None:
+        if self._u32 is None or self._w32 is None:
             self._u32 = self.inducing_.astype(np.float32)
             self._w32 = self._w.astype(np.float32)
         return self._u32, self._w32
@@ -256,6 +256,8 @@ class DensityReward:
     def save(self, path: str | Path) -> None:
         """Write an ``.npz`` (arrays + a JSON metadata string; no pickle), atomically."""
         self._check_fitted()
+        assert self.inducing_ is not None and self.leverage_ is not None and self.alpha_ is not None
+        assert self.mean_ is not None and self.std_ is not None
         meta = {
             "format": FORMAT,
             "config": self.config.to_dict(),

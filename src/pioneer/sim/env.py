@@ -116,12 +116,14 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         """Apply ``(v, ω)`` for one control period."""
         prev = self.state
-        new = step(self.world, prev, np.asarray(action, dtype=np.float64).reshape(1, 2))
+        new = step(self.world, prev, np.asarray(action, dtype=np.float64))
         self._state = new
         self._ep_min_clear = min(self._ep_min_clear, float(new.clearance[0]))
         collided = bool(new.collided[0])
         reached = bool(new.reached[0])
-        timeout = not (collided or reached) and new.t[0] >= self.scenario.sim.time_limit - 1e-9
+        timeout = bool(
+            not (collided or reached) and new.t[0] >= self.scenario.sim.time_limit - 1e-9
+        )
         event = (
             "collision" if collided else "success" if reached else "timeout" if timeout else None
         )

@@ -49,6 +49,7 @@ __all__ = ["ARRIVED", "GONE", "WALKING", "SocialForceConfig", "sfm_substep"]
 WALKING = 0  # moves toward its waypoints
 ARRIVED = 1  # reached its final goal; stays as a static obstacle
 GONE = 2  # left the map; ignored by forces, sensing and collisions
+SFM_SCRATCH_COLUMNS = 4  # fx, fy, ready, nearest-wall distance
 EXP_CUTOFF = -12.0  # repulsion terms below A·e^-12 (< 1e-5 m/s²) are skipped
 
 
@@ -145,6 +146,8 @@ def sfm_substep(
     settle_d = params[11]
     n = pos.shape[0]
     m = walls.shape[0]
+    if scratch.shape[0] < n or scratch.shape[1] < SFM_SCRATCH_COLUMNS:
+        raise ValueError("sfm_substep: scratch must have shape (N, SFM_SCRATCH_COLUMNS)")
     fx = scratch[:, 0]
     fy = scratch[:, 1]
     ready = scratch[:, 2]  # 1.0 = walking toward its waypoints, 0.0 = waiting or stopped

@@ -81,7 +81,8 @@ def clip_command(u: NDArray[np.float64], cfg: RobotConfig) -> NDArray[np.float64
 @njit(cache=True, inline="always")
 def wrap_angle(a: float) -> float:
     """Wrap an angle [rad] to (−π, π]."""
-    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+    r = math.pi - ((math.pi - a) % (2.0 * math.pi))
+    return r if r > -math.pi else math.pi
 
 
 @njit(cache=True, inline="always")

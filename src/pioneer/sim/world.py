@@ -30,7 +30,7 @@ from pioneer.sim.geometry import (
     segment_segment_distance,
     swept_point_distance,
 )
-from pioneer.sim.humans import GONE, SocialForceConfig, sfm_substep
+from pioneer.sim.humans import GONE, SFM_SCRATCH_COLUMNS, SocialForceConfig, sfm_substep
 from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
 from pioneer.sim.robot import RobotConfig, clip_command, integrate_unicycle, validate_command
 
@@ -108,6 +108,15 @@ class State:
     h_delay: F64  # (B, N) time at which each human starts walking [s]
     h_wait_for: NDArray[np.int64]  # (B, N, N) 1: human i waits until human j left/arrived
     h_home: F64  # (B, N, 2) position a waiting human holds [m]
+
+    def __eq__(self, other: object) -> bool:
+        """Value equality: every array equal (states are values, e.g. in ``info``)."""
+        if not isinstance(other, State):
+            return NotImplemented
+        mine, theirs = self._arrays(), other._arrays()
+        return all(np.array_equal(mine[k], theirs[k]) for k in mine)
+
+    __hash__ = None  # type: ignore[assignment]
 
     @property
     def batch_size(self) -> int:
@@ -224,7 +233,7 @@ def _step_kernel(
     m = walls.shape[0]
     h = dt / n_sub
     old = np.empty((n_h, 2))
-    scratch = np.empty((n_h, 3))
+    scratch = np.empty((n_h, SFM_SCRATCH_COLUMNS))
     was_present = np.empty(n_h, dtype=np.bool_)
     for b in range(n_b):
         x = robot[b, 0]
