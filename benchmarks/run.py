@@ -5,9 +5,13 @@ timed with :func:`time.perf_counter` over repeated runs. The table shows medians
 interquartile ranges; ``benchmarks/results/latest.json`` gets the same numbers plus the
 machine description and a timestamp (written atomically: temp file + ``os.replace``).
 
-    .venv/bin/python benchmarks/run.py                 # everything (≈ 1 minute)
+    .venv/bin/python benchmarks/run.py                 # everything (≈ 1–2 minutes)
     .venv/bin/python benchmarks/run.py --quick         # fewer repeats
     .venv/bin/python benchmarks/run.py --only env_step # one benchmark (others kept in the JSON)
+
+By default the script re-runs itself with ``NUMBA_CACHE_DIR`` set to an empty temporary
+directory, so the kernels are compiled from the current source (numba's cache does not notice
+edits to functions in other files); ``--reuse-numba-cache`` skips that.
 
 Benchmarks and targets (docs/performance.md explains them):
 
@@ -25,6 +29,7 @@ import contextlib
 import dataclasses
 import datetime
 import gc
+import hashlib
 import importlib.metadata
 import json
 import logging
@@ -76,13 +81,13 @@ class Plan:
     """Repeat counts and work sizes (``--quick`` shrinks the repeats, never the work)."""
 
     env_steps: int = 2000  # env steps per timed run
-    env_repeats: int = 15
+    env_repeats: int = 21
     psf_steps: int = 1000  # pysocialforce steps per timed run
-    psf_repeats: int = 10
-    raycast_repeats: int = 200
-    batch_repeats: int = 60
+    psf_repeats: int = 15
+    raycast_repeats: int = 301
+    batch_repeats: int = 101
     breakdown_calls: int = 2000  # calls per run in the per-step breakdown
-    breakdown_repeats: int = 7
+    breakdown_repeats: int = 9
     memory_repeats: int = 3
 
 
@@ -113,23 +118,39 @@ def summarize(samples: list[float] | np.ndarray, unit: str) -> dict[str, Any]:
     }
 
 
-def time_runs(
-    run: Callable[[Any], object],
-    repeats: int,
-    setup: Callable[[], Any] | None = None,
-    warmup: int = 1,
-) -> list[float]:
-    """Seconds per call of ``run(setup())``; ``setup`` and the warm-up calls are untimed."""
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """One timed thing: ``run(setup())``, where ``setup`` (untimed) may be omitted."""
+
+    run: Callable[[Any], object]
+    setup: Callable[[], Any] | None = None
+
+
+def time_cases(cases: dict[str, Case], repeats: int, warmup: int = 1) -> dict[str, np.ndarray]:
+    """Seconds per run of every case, ``repeats`` times each, after ``warmup`` untimed rounds.
+
+    The cases are timed round-robin (a, b, c, a, b, c, …), so a burst of load from another
+    process on this shared machine hits every case alike and ratios between them stay fair.
+    The garbage collector stays on, but everything alive beforehand is frozen out of its
+    scans (``gc.freeze``), so the odd full collection costs what the timed code allocated,
+    not what earlier benchmarks (e.g. matplotlib via pysocialforce) left in the heap.
+    """
     for _ in range(warmup):
-        run(setup() if setup is not None else None)
-    out = []
-    for _ in range(repeats):
-        arg = setup() if setup is not None else None
-        gc.collect()
-        t0 = time.perf_counter()
-        run(arg)
-        out.append(time.perf_counter() - t0)
-    return out
+        for c in cases.values():
+            c.run(c.setup() if c.setup is not None else None)
+    out: dict[str, list[float]] = {k: [] for k in cases}
+    gc.collect()
+    gc.freeze()
+    try:
+        for _ in range(repeats):
+            for k, c in cases.items():
+                arg = c.setup() if c.setup is not None else None
+                t0 = time.perf_counter()
+                c.run(arg)
+                out[k].append(time.perf_counter() - t0)
+    finally:
+        gc.unfreeze()
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
 def metric(
@@ -181,33 +202,36 @@ def _env_rollout(env: gym.Env, actions: np.ndarray) -> int:
     return resets
 
 
+def _env_case(env: gym.Env, actions: np.ndarray, resets: list[int]) -> Case:
+    """A full rollout of ``actions`` from the seeded reset state (identical work every run)."""
+
+    def setup() -> gym.Env:
+        env.reset(seed=SEED)
+        return env
+
+    def run(e: gym.Env) -> None:
+        resets.append(_env_rollout(e, actions))
+
+    return Case(run, setup)
+
+
 def bench_env_step(plan: Plan) -> dict[str, Any]:
     """Steps/s of the Gymnasium env, raw and wrapped, plus a per-step cost breakdown."""
-    metrics: dict[str, Any] = {}
-    info: dict[str, Any] = {}
-    for label, make in (
-        ("raw", lambda: gym.make(ENV_ID).unwrapped),
-        ("wrapped", lambda: gym.make(ENV_ID)),
-    ):
-        env = make()
-        actions = seeded_actions(env.action_space, plan.env_steps, SEED + 1)
-        resets: list[int] = []
-
-        def setup(env: gym.Env = env) -> gym.Env:
-            env.reset(seed=SEED)  # identical work in every run
-            return env
-
-        def run(e: gym.Env, actions: np.ndarray = actions, resets: list[int] = resets) -> None:
-            resets.append(_env_rollout(e, actions))
-
-        secs = time_runs(run, plan.env_repeats, setup=setup, warmup=1)
-        metrics[f"steps_per_s_{label}"] = metric(
-            plan.env_steps / np.asarray(secs), "steps/s", (">=", 5000.0)
-        )
-        info[f"resets_per_run_{label}"] = resets[-1]
-        info[f"wrappers_{label}"] = str(env)
-        env.close()
-    info["steps_per_run"] = plan.env_steps
+    envs = {"raw": gym.make(ENV_ID).unwrapped, "wrapped": gym.make(ENV_ID)}
+    actions = seeded_actions(envs["raw"].action_space, plan.env_steps, SEED + 1)
+    resets: dict[str, list[int]] = {k: [] for k in envs}
+    secs = time_cases(
+        {k: _env_case(e, actions, resets[k]) for k, e in envs.items()}, plan.env_repeats
+    )
+    metrics = {
+        f"steps_per_s_{k}": metric(plan.env_steps / secs[k], "steps/s", (">=", 5000.0))
+        for k in envs
+    }
+    info: dict[str, Any] = {"steps_per_run": plan.env_steps}
+    for k, e in envs.items():
+        info[f"resets_per_run_{k}"] = resets[k][-1]
+        info[f"wrappers_{k}"] = str(e)
+        e.close()
     metrics.update(_env_breakdown(plan))
     return {"metrics": metrics, "info": info}
 
@@ -228,9 +252,6 @@ def _env_breakdown(plan: Plan) -> dict[str, Any]:
     gb = np.zeros(1)
     actions = seeded_actions(env.action_space, n, SEED + 1)
 
-    def env_steps(_: object) -> None:
-        _env_rollout(env, actions)
-
     def world_steps(_: object) -> None:
         s = s0
         for _ in range(n):
@@ -248,23 +269,19 @@ def _env_breakdown(plan: Plan) -> dict[str, Any]:
         for _ in range(n):
             observation_from_ranges(ranges, gb, lid)
 
-    parts: dict[str, Callable[[object], None]] = {
-        "env_step_raw": env_steps,
-        "world_step_b1": world_steps,
-        "observe_b1": observes,
-        "cast_rays_b1": raycasts,
-        "observation_from_ranges_b1": obs_from_ranges,
+    cases = {
+        "env_step_raw": _env_case(env, actions, []),
+        "world_step_b1": Case(world_steps),
+        "observe_b1": Case(observes),
+        "cast_rays_b1": Case(raycasts),
+        "observation_from_ranges_b1": Case(obs_from_ranges),
     }
-    kernel = _step_kernel_runner(world, s0, u, n)
+    kernel = _step_kernel_case(world, s0, u, n)
     if kernel is not None:
-        parts["step_kernel_b1"] = kernel
-    out = {}
-    for name, fn in parts.items():
-        env.reset(seed=SEED)
-        secs = time_runs(fn, plan.breakdown_repeats, warmup=1)
-        out[f"us_per_call_{name}"] = metric(np.asarray(secs) / n * 1e6, "us")
+        cases["step_kernel_b1"] = kernel
+    secs = time_cases(cases, plan.breakdown_repeats)
     env.close()
-    return out
+    return {f"us_per_call_{k}": metric(v / n * 1e6, "us") for k, v in secs.items()}
 
 
 def _step_kernel_args(world: Any, s: State, u: np.ndarray, dt: float, n_sub: int) -> tuple:
@@ -300,10 +317,10 @@ def _step_kernel_args(world: Any, s: State, u: np.ndarray, dt: float, n_sub: int
     )
 
 
-def _step_kernel_runner(
+def _step_kernel_case(
     world: Any, s0: State, u: np.ndarray, n: int, dt: float | None = None
-) -> Callable[[object], None] | None:
-    """``n`` in-place calls of the bare step kernel, or None if its signature changed."""
+) -> Case | None:
+    """``n`` chained in-place calls of the bare step kernel (None if its signature changed)."""
     try:
         from pioneer.sim.world import _step_kernel
     except ImportError:
@@ -312,17 +329,19 @@ def _step_kernel_runner(
     n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
     uc = np.ascontiguousarray(u, dtype=np.float64)
 
-    def run(_: object) -> None:
-        args = _step_kernel_args(world, s0.copy(), uc, h_dt, n_sub)
+    def setup() -> tuple:
+        return _step_kernel_args(world, s0.copy(), uc, h_dt, n_sub)
+
+    def run(args: tuple) -> None:
         for _ in range(n):
             _step_kernel(*args)
 
     try:
-        run(None)
+        run(setup())
     except Exception as exc:  # the kernel is private: skip the diagnostic if it moved
         log.warning("step-kernel diagnostic skipped: %s", exc)
         return None
-    return run
+    return Case(run, setup)
 
 
 # --------------------------------------------------------------------------------------------
@@ -395,56 +414,76 @@ def _psf_scene(state: State, walls: np.ndarray) -> tuple[np.ndarray, list[tuple]
     return psf_state, obstacles
 
 
-def bench_pysocialforce_step(plan: Plan, ours: dict[str, Any] | None) -> dict[str, Any]:
-    """Steps/s of the same 3-pedestrian elevator scene in ``pysocialforce`` (no LiDAR)."""
-    info: dict[str, Any] = {"steps_per_run": plan.psf_steps}
+def bench_pysocialforce_step(plan: Plan) -> dict[str, Any]:
+    """Steps/s of the same 3-pedestrian elevator scene in ``pysocialforce`` (no LiDAR).
+
+    Timed round-robin with our raw env (LiDAR, observation, reward) and our bare
+    ``world.step`` (B = 1, social force + robot, no LiDAR) over the same number of steps, so
+    the ratios ours/theirs come from the same time window.
+    """
+    n = plan.psf_steps
+    info: dict[str, Any] = {"steps_per_run": n}
     try:
-        version = importlib.metadata.version("pysocialforce")
+        info["pysocialforce_version"] = importlib.metadata.version("pysocialforce")
     except importlib.metadata.PackageNotFoundError:
-        version = None
-    info["pysocialforce_version"] = version
+        info["pysocialforce_version"] = None
     try:
         psf = _import_pysocialforce()
-        scenario, _, state = elevator_setup(SEED + 2)
+        scenario, world, state = elevator_setup(SEED + 2)
         psf_state, obstacles = _psf_scene(state, np.asarray(scenario.walls))
+        env = gym.make(ENV_ID).unwrapped
+        actions = seeded_actions(env.action_space, n, SEED + 1)
+        u = np.array([[0.4, 0.3]])
         with tempfile.TemporaryDirectory(prefix="pioneer-bench-psf-") as tmp:
             cfg = Path(tmp) / "bench.toml"
             cfg.write_text(PSF_CONFIG)
 
-            def setup() -> Any:
+            def psf_setup() -> Any:
                 return psf.Simulator(
                     psf_state.copy(), groups=None, obstacles=obstacles, config_file=str(cfg)
                 )
 
-            def run(sim: Any) -> None:
-                sim.step(plan.psf_steps)
+            def psf_run(sim: Any) -> None:
+                sim.step(n)
 
-            secs = time_runs(run, plan.psf_repeats, setup=setup, warmup=1)
-            last = setup().step(plan.psf_steps)
+            def world_run(_: object) -> None:
+                s = state
+                for _ in range(n):
+                    s = step(world, s, u)
+
+            secs = time_cases(
+                {
+                    "pysocialforce": Case(psf_run, psf_setup),
+                    "env_raw": _env_case(env, actions, []),
+                    "world_step_b1": Case(world_run),
+                },
+                plan.psf_repeats,
+            )
+            last = psf_setup().step(n)
             info["final_positions"] = np.round(last.peds.pos(), 3).tolist()
+            info["goals"] = np.round(psf_state[:, 4:6], 3).tolist()
             info["forces"] = [type(f).__name__ for f in last.forces]
+            info["config"] = PSF_CONFIG
+        env.close()
     except Exception as exc:  # report why instead of inventing a number
         reason = f"{type(exc).__name__}: {exc}"
         log.warning("pysocialforce benchmark unavailable: %s", reason)
         info["status"] = "unavailable"
         info["reason"] = reason
         return {"metrics": {}, "info": info}
-    theirs = plan.psf_steps / np.asarray(secs)
-    metrics: dict[str, Any] = {"steps_per_s_pysocialforce": metric(theirs, "steps/s")}
-    med_theirs = float(np.median(theirs))
-    if ours:
-        em = ours.get("metrics", {})
-        for key, label in (
-            ("steps_per_s_raw", "ratio_env_raw_over_psf"),
-            ("steps_per_s_wrapped", "ratio_env_wrapped_over_psf"),
-        ):
-            if key in em:
-                info[label] = em[key]["median"] / med_theirs
-        ws = em.get("us_per_call_world_step_b1")
-        if ws:
-            info["ratio_world_step_b1_over_psf"] = (1e6 / ws["median"]) / med_theirs
     info["status"] = "ok"
-    return {"metrics": metrics, "info": info}
+    theirs = secs["pysocialforce"]
+    return {
+        "metrics": {
+            "steps_per_s_pysocialforce": metric(n / theirs, "steps/s"),
+            "steps_per_s_env_raw": metric(n / secs["env_raw"], "steps/s"),
+            "steps_per_s_world_step_b1": metric(n / secs["world_step_b1"], "steps/s"),
+            # per round: their time / our time for the same number of steps
+            "ratio_env_raw_over_psf": metric(theirs / secs["env_raw"], "x"),
+            "ratio_world_step_b1_over_psf": metric(theirs / secs["world_step_b1"], "x"),
+        },
+        "info": info,
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -491,7 +530,7 @@ def bench_raycast_batch(plan: Plan) -> dict[str, Any]:
     def run(_: object) -> None:
         cast_rays(poses, circles, walls, lid.n_beams, lid.max_range)
 
-    secs = np.asarray(time_runs(run, plan.raycast_repeats, warmup=3))
+    secs = time_cases({"cast_rays": Case(run)}, plan.raycast_repeats, warmup=3)["cast_rays"]
     rays = n_poses * lid.n_beams
     return {
         "metrics": {
@@ -530,26 +569,16 @@ def bench_world_step_batch(plan: Plan) -> dict[str, Any]:
     rng = np.random.default_rng(SEED + 6)
     robot = scenario.sim.robot
     cmds = rng.uniform(robot.command_low, robot.command_high, size=(n_copies, 2))
-    rollout: list[State] = []
 
-    def run(_: object) -> None:
+    def rollout() -> list[State]:
         s = batch
-        rollout.clear()
+        out = []
         for _ in range(n_steps):
             s = step(world, s, cmds, dt=dt)
-            rollout.append(s)
+            out.append(s)
+        return out
 
-    secs = np.asarray(time_runs(run, plan.batch_repeats, warmup=2))
-    n_sub = max(1, math.ceil(dt / scenario.sim.social_force.max_substep - 1e-9))
-    metrics: dict[str, Any] = {
-        "ms_10_steps": metric(secs * 1e3, "ms", ("<=", 3.0)),
-        "ns_per_copy_substep": metric(secs / (n_copies * n_steps * n_sub) * 1e9, "ns"),
-    }
-    kernel = _step_kernel_runner(world, batch, cmds, n_steps, dt=dt)
-    if kernel is not None:
-        ksecs = np.asarray(time_runs(kernel, plan.batch_repeats, warmup=1))
-        metrics["ms_10_steps_kernel_only"] = metric(ksecs * 1e3, "ms")
-    states = list(rollout)
+    states = rollout()
     big = concat_states(states)
 
     def observe_each(_: object) -> None:
@@ -559,12 +588,22 @@ def bench_world_step_batch(plan: Plan) -> dict[str, Any]:
     def observe_once(_: object) -> None:
         observe(world, big)
 
-    metrics["ms_observe_10x120"] = metric(
-        np.asarray(time_runs(observe_each, plan.batch_repeats, warmup=2)) * 1e3, "ms"
-    )
-    metrics["ms_observe_1x1200"] = metric(
-        np.asarray(time_runs(observe_once, plan.batch_repeats, warmup=2)) * 1e3, "ms"
-    )
+    cases = {"step": Case(lambda _: rollout())}
+    kernel = _step_kernel_case(world, batch, cmds, n_steps, dt=dt)
+    if kernel is not None:
+        cases["kernel_only"] = kernel
+    cases["observe_10x120"] = Case(observe_each)
+    cases["observe_1x1200"] = Case(observe_once)
+    secs = time_cases(cases, plan.batch_repeats, warmup=2)
+    n_sub = max(1, math.ceil(dt / scenario.sim.social_force.max_substep - 1e-9))
+    metrics: dict[str, Any] = {
+        "ms_10_steps": metric(secs["step"] * 1e3, "ms", ("<=", 3.0)),
+        "ns_per_copy_substep": metric(secs["step"] / (n_copies * n_steps * n_sub) * 1e9, "ns"),
+    }
+    if "kernel_only" in secs:
+        metrics["ms_10_steps_kernel_only"] = metric(secs["kernel_only"] * 1e3, "ms")
+    metrics["ms_observe_10x120"] = metric(secs["observe_10x120"] * 1e3, "ms")
+    metrics["ms_observe_1x1200"] = metric(secs["observe_1x1200"] * 1e3, "ms")
     final = states[-1]
     return {
         "metrics": metrics,
@@ -627,7 +666,7 @@ def bench_memory(plan: Plan) -> dict[str, Any]:
     n_steps = 1000
     code = MEMORY_CHILD.format(env_id=ENV_ID, seed=SEED + 7, n=n_steps)
     peaks, imports, starts, hwms, heavy_all, n_modules = [], [], [], [], set(), []
-    for _ in range(plan.memory_repeats):
+    for k in range(plan.memory_repeats + 1):  # run 0 only fills the numba cache
         proc = subprocess.run(
             [sys.executable, "-S", "-c", MEMORY_LAUNCHER, code],
             cwd=REPO,
@@ -639,6 +678,8 @@ def bench_memory(plan: Plan) -> dict[str, Any]:
         if not lines:
             raise RuntimeError(f"memory child failed ({proc.returncode}): {proc.stderr[-2000:]}")
         rec = json.loads(lines[-1])
+        if k == 0:
+            continue
         # ru_maxrss is in KiB on Linux (bytes on macOS).
         scale = 1.0 / (1024 * 1024) if sys.platform == "darwin" else 1.0 / 1024
         peaks.append(rec["rss_peak_kb"] * scale)
@@ -722,8 +763,7 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
             if name == "env_step":
                 res = bench_env_step(plan)
             elif name == "pysocialforce_step":
-                ours = results.get("env_step") or _previous_result("env_step")
-                res = bench_pysocialforce_step(plan, ours)
+                res = bench_pysocialforce_step(plan)
             elif name == "raycast_batch":
                 res = bench_raycast_batch(plan)
             elif name == "world_step_batch":
@@ -742,10 +782,6 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
 
 
 _PREVIOUS: dict[str, Any] = {}
-
-
-def _previous_result(name: str) -> dict[str, Any] | None:
-    return _PREVIOUS.get("benchmarks", {}).get(name)
 
 
 def _fmt(v: float) -> str:
@@ -777,9 +813,6 @@ def print_table(results: dict[str, dict[str, Any]]) -> None:
                 )
             )
         info = res.get("info", {})
-        for key, value in info.items():
-            if key.startswith("ratio_"):
-                rows.append((name, key, _fmt(value), "", "x", "", ""))
         if info.get("status") in ("error", "unavailable"):
             rows.append((name, info["status"].upper(), "-", "", "", "", "see below"))
             notes.append(f"{name}: {info['status']}: {info.get('reason', '')}")
@@ -809,6 +842,42 @@ def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
         raise
 
 
+FRESH_CACHE_ENV = "PIONEER_BENCH_FRESH_NUMBA_CACHE"
+
+
+def _rerun_with_fresh_numba_cache(argv: list[str]) -> int:
+    """Run this script again with ``NUMBA_CACHE_DIR`` pointing at an empty temp directory.
+
+    numba's on-disk cache is keyed on the source file of the jitted function only: after an
+    edit to ``humans.py`` or ``geometry.py`` the cached ``world._step_kernel`` (which inlines
+    them) is still loaded, so a benchmark would silently time the old code. Compiling afresh
+    costs a few seconds (excluded from every timing by the warm-up runs).
+    """
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-numba-") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, FRESH_CACHE_ENV: "1"}
+        cmd = [sys.executable, str(Path(__file__).resolve()), *argv]
+        return subprocess.run(cmd, env=env, check=False).returncode
+
+
+def source_fingerprint() -> dict[str, Any]:
+    """SHA-256 over ``src/pioneer/**/*.py`` (path + content) and the newest mtime."""
+    src = REPO / "src" / "pioneer"
+    digest = hashlib.sha256()
+    newest = 0.0
+    files = sorted(src.rglob("*.py"))
+    for f in files:
+        digest.update(str(f.relative_to(src)).encode())
+        digest.update(f.read_bytes())
+        newest = max(newest, f.stat().st_mtime)
+    return {
+        "sha256": digest.hexdigest(),
+        "files": len(files),
+        "newest_mtime": datetime.datetime.fromtimestamp(newest, datetime.UTC).isoformat(
+            timespec="seconds"
+        ),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repeats (smoke run)")
@@ -825,7 +894,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--strict", action="store_true", help="exit with status 1 if any target is missed"
     )
+    parser.add_argument(
+        "--reuse-numba-cache",
+        action="store_true",
+        help="use the kernels cached in src/**/__pycache__ instead of compiling afresh",
+    )
     args = parser.parse_args(argv)
+    if not args.reuse_numba_cache and FRESH_CACHE_ENV not in os.environ:
+        return _rerun_with_fresh_numba_cache(sys.argv[1:] if argv is None else argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     names = list(args.only) if args.only else list(BENCHMARKS)
     plan = QUICK if args.quick else FULL
@@ -854,6 +930,8 @@ def main(argv: list[str] | None = None) -> int:
         "ran": names,
         "elapsed_s": round(elapsed, 2),
         "machine": machine_info(),
+        "source": source_fingerprint(),
+        "numba_cache": "fresh" if os.environ.get(FRESH_CACHE_ENV) else "reused",
         "benchmarks": {name: merged[name] for name in BENCHMARKS if name in merged},
     }
     write_json_atomic(args.output, payload)
