@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from pioneer.errors import PioneerError
 
@@ -44,6 +45,113 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demos_generate(args: argparse.Namespace) -> int:
+    from pioneer.demos.generate import generate
+
+    cmd = " ".join(["pioneer", *sys.argv[1:]]) if sys.argv[0].endswith("pioneer") else ""
+    d = generate(args.scenario, args.positive, args.negative, seed=args.seed, command=cmd)
+    d.save(args.out)
+    print(json.dumps({"out": args.out, **d.summary()}))
+    return 0
+
+
+def _cmd_demos_show(args: argparse.Namespace) -> int:
+    from pioneer.demos.dataset import Dataset
+
+    d = Dataset.load(args.demos)
+    meta = {k: v for k, v in d.meta.items() if k not in ("feature_names", "units")}
+    print(json.dumps({**d.summary(), "meta": meta}, indent=2))
+    return 0
+
+
+def _default_features(scenarios: tuple[str, ...]) -> str:
+    return "xy" if scenarios == ("static",) else "obs_action"
+
+
+def _cmd_reward_fit(args: argparse.Namespace) -> int:
+    from pioneer.demos.dataset import Dataset, feature_map
+    from pioneer.reward.density import DensityConfig, DensityReward
+    from pioneer.reward.select import select_length_scale
+
+    d = Dataset.load(args.demos)
+    if args.min_gamma is not None:
+        d = d.filter(min_gamma=args.min_gamma)
+    fm = feature_map(args.features or _default_features(d.scenarios))
+    z = fm.from_dataset(d)
+    cfg = DensityConfig(
+        length_scale=args.length_scale,
+        lam=args.lam,
+        beta=args.beta,
+        max_inducing=args.max_inducing,
+        inducing=args.inducing,
+    )
+    records = None
+    if args.select_length:
+        length, records = select_length_scale(z, d.gamma, d.episode, cfg)
+        cfg = cfg.replace(length_scale=length)
+    model = DensityReward(cfg).fit(z, d.gamma, list(fm.names))
+    model.info_.update({"demos": str(args.demos), "features": fm.name})
+    if records is not None:
+        model.info_["length_selection"] = records
+    model.save(args.out)
+    print(
+        json.dumps(
+            {
+                "out": args.out,
+                "length_scale": model.length_,
+                "scale": model.scale_,
+                "n_train": model.n_train_,
+                **model.info_,
+            }
+        )
+    )
+    return 0
+
+
+def _cmd_reward_show(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from pioneer.demos.dataset import Dataset, feature_map
+    from pioneer.reward.density import DensityReward
+    from pioneer.stats import auroc
+
+    m = DensityReward.load(args.model)
+    out = {
+        "model": args.model,
+        "features": m.info_.get("features", "?"),
+        "feature_dim": len(m.feature_names),
+        "n_train": m.n_train_,
+        "n_inducing": int(m.alpha_.shape[0]) if m.alpha_ is not None else 0,
+        "length_scale": m.length_,
+        "scale": m.scale_,
+        "hyperparameters": m.config.to_dict(),
+    }
+    demos = args.demos or m.info_.get("demos")
+    if demos:
+        d = Dataset.load(demos)
+        r = m(
+            feature_map(str(m.info_.get("features", _default_features(d.scenarios)))).from_dataset(
+                d
+            )
+        )
+        pos, neg = d.gamma > 0, d.gamma < 0
+        out["demos"] = str(demos)
+        out["reward_positive_mean"] = float(np.mean(r[pos])) if pos.any() else None
+        out["reward_negative_mean"] = float(np.mean(r[neg])) if neg.any() else None
+        out["auroc_pos_vs_neg"] = auroc(r[pos | neg], pos[pos | neg])
+    print(json.dumps(out, indent=2))
+    return 0
+
+
+def _cmd_study_static(args: argparse.Namespace) -> int:
+    from pioneer.demos.dataset import Dataset
+    from pioneer.reward.study import run_static_study
+
+    summary = run_static_study(Dataset.load(args.demos), args.out)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pioneer", description="PioneeR social navigation toolkit")
     sub = p.add_subparsers(dest="command", required=True)
@@ -55,7 +163,54 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--png", help="write a trajectory plot here")
     r.add_argument("--lidar", action="store_true", help="draw the LiDAR rays in the GIF")
     r.set_defaults(func=_cmd_run)
+
+    demos = sub.add_parser("demos", help="demonstration datasets").add_subparsers(
+        dest="demos_command", required=True
+    )
+    g = demos.add_parser("generate", help="scripted demonstrations (γ = +1 and −1)")
+    g.add_argument("--scenario", required=True, help="hr-rl, hl-rr or static")
+    g.add_argument("--out", required=True, help="output .npz")
+    g.add_argument("--positive", type=int, help="positive samples (default: the paper's count)")
+    g.add_argument("--negative", type=int, help="negative samples (default: the paper's count)")
+    g.add_argument("--seed", type=int, default=0)
+    g.set_defaults(func=_cmd_demos_generate)
+    sh = demos.add_parser("show", help="summary of a dataset file")
+    sh.add_argument("demos")
+    sh.set_defaults(func=_cmd_demos_show)
+
+    reward = sub.add_parser("reward", help="the learned density reward").add_subparsers(
+        dest="reward_command", required=True
+    )
+    f = reward.add_parser("fit", help="fit the density reward on a dataset")
+    f.add_argument("--demos", required=True)
+    f.add_argument("--out", required=True, help="output model .npz")
+    f.add_argument("--features", choices=["xy", "obs_action"], help="default: by scenario")
+    f.add_argument("--length-scale", type=float, help="l in standardised units")
+    f.add_argument("--select-length", action="store_true", help="pick l by held-out AUROC")
+    f.add_argument("--lam", type=float, default=1e-2)
+    f.add_argument("--beta", type=float, default=1e-3)
+    f.add_argument("--max-inducing", type=int, default=2000)
+    f.add_argument("--inducing", choices=["kmeans", "fps"], default="kmeans")
+    f.add_argument("--min-gamma", type=float, help="drop samples with γ below this")
+    f.set_defaults(func=_cmd_reward_fit)
+    s2 = reward.add_parser("show", help="summary of a fitted model")
+    s2.add_argument("--model", required=True)
+    s2.add_argument("--demos", help="dataset to score (default: the training set)")
+    s2.set_defaults(func=_cmd_reward_show)
+
+    study = sub.add_parser("study", help="paper studies").add_subparsers(
+        dest="study_command", required=True
+    )
+    st = study.add_parser("static", help="the synthetic static study (paper Fig. 3)")
+    st.add_argument("--demos", default=str(_shipped("static.npz")), help="static-study demos")
+    st.add_argument("--out", required=True, help="output folder")
+    st.set_defaults(func=_cmd_study_static)
     return p
+
+
+def _shipped(name: str) -> Path:
+    """Path of a dataset shipped with the package."""
+    return Path(__file__).parent / "data" / "demos" / name
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -50,6 +50,12 @@ _FIELDS: dict[str, tuple[str, tuple[int, ...]]] = {
 }
 
 
+def _dtype(field: str) -> type[np.generic]:
+    if field == "obs":
+        return np.float32
+    return np.int64 if _FIELDS[field][0] == "i" else np.float64
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Dataset:
     """A set of demonstration samples (all arrays have N rows)."""
@@ -80,25 +86,15 @@ class Dataset:
             raise DataError(
                 expect("dataset", f"columns {sorted(_FIELDS)}", f"missing {missing}", "add them")
             )
-        cast = {
-            k: np.asarray(
-                rows[k],
-                dtype=np.float32
-                if k == "obs"
-                else np.int64
-                if _FIELDS[k][0] == "i"
-                else np.float64,
-            )
-            for k in _FIELDS
-        }
+        cast: dict[str, Any] = {k: np.asarray(rows[k], dtype=_dtype(k)) for k in _FIELDS}
         return cls(**cast, scenarios=tuple(scenarios), meta=dict(meta or {}))
 
-    @classmethod
-    def empty_like(cls, scenarios: Sequence[str]) -> dict[str, list[Any]]:
-        """Column lists to append rows to, then pass to :meth:`from_rows`."""
+    @staticmethod
+    def columns() -> dict[str, list[Any]]:
+        """Empty column lists to append rows to, then pass to :meth:`from_rows`."""
         return {k: [] for k in _FIELDS}
 
-    def _arrays(self) -> dict[str, NDArray[Any]]:
+    def _arrays(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in _FIELDS}
 
     def __len__(self) -> int:
