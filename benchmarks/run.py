@@ -774,6 +774,7 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
             log.exception("benchmark %s failed", name)
             res = {"metrics": {}, "info": {"status": "error", "reason": repr(exc)}}
         res["timestamp"] = _now()
+        res["mode"] = "quick" if plan == QUICK else "full"
         res["wall_time_s"] = round(time.perf_counter() - t0, 2)
         res["repeats"] = {m: v["n"] for m, v in res["metrics"].items()}
         res["load_average"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
@@ -830,6 +831,9 @@ def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # mkstemp creates 0600; give it a normal file's mode
         with os.fdopen(fd, "w") as f:
             json.dump(payload, f, indent=2, sort_keys=False)
             f.write("\n")
@@ -860,22 +864,25 @@ def _rerun_with_fresh_numba_cache(argv: list[str]) -> int:
 
 
 def source_fingerprint() -> dict[str, Any]:
-    """SHA-256 over ``src/pioneer/**/*.py`` (path + content) and the newest mtime."""
+    """SHA-256 over the sources (path + content): all of ``src/pioneer`` and ``sim`` alone."""
     src = REPO / "src" / "pioneer"
-    digest = hashlib.sha256()
-    newest = 0.0
-    files = sorted(src.rglob("*.py"))
-    for f in files:
-        digest.update(str(f.relative_to(src)).encode())
-        digest.update(f.read_bytes())
-        newest = max(newest, f.stat().st_mtime)
-    return {
-        "sha256": digest.hexdigest(),
-        "files": len(files),
-        "newest_mtime": datetime.datetime.fromtimestamp(newest, datetime.UTC).isoformat(
-            timespec="seconds"
-        ),
-    }
+    out: dict[str, Any] = {}
+    for label, root in (("package", src), ("sim", src / "sim")):
+        digest = hashlib.sha256()
+        newest = 0.0
+        files = sorted(root.rglob("*.py"))
+        for f in files:
+            digest.update(str(f.relative_to(src)).encode())
+            digest.update(f.read_bytes())
+            newest = max(newest, f.stat().st_mtime)
+        out[label] = {
+            "sha256": digest.hexdigest(),
+            "files": len(files),
+            "newest_mtime": datetime.datetime.fromtimestamp(newest, datetime.UTC).isoformat(
+                timespec="seconds"
+            ),
+        }
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -910,9 +917,14 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.suppress(OSError, ValueError):
             _PREVIOUS.update(json.loads(args.output.read_text()))
 
+    source_before = source_fingerprint()
     t0 = time.perf_counter()
     results = run_benchmarks(names, plan)
     elapsed = time.perf_counter() - t0
+    source = source_fingerprint()
+    sim_changed = source["sim"]["sha256"] != source_before["sim"]["sha256"]
+    if sim_changed:
+        log.warning("src/pioneer/sim changed while the benchmarks ran: numbers may be mixed")
 
     print()
     print_table(results)
@@ -930,7 +942,8 @@ def main(argv: list[str] | None = None) -> int:
         "ran": names,
         "elapsed_s": round(elapsed, 2),
         "machine": machine_info(),
-        "source": source_fingerprint(),
+        "source": source,
+        "sim_source_changed_during_run": sim_changed,
         "numba_cache": "fresh" if os.environ.get(FRESH_CACHE_ENV) else "reused",
         "benchmarks": {name: merged[name] for name in BENCHMARKS if name in merged},
     }
