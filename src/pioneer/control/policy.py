@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["Policy", "make_policy", "policy_names", "register_policy"]
+__all__ = ["Policy", "make_policy", "policy_factory", "policy_names", "register_policy"]
 
 
 @runtime_checkable
@@ -44,6 +44,15 @@ def register_policy(name: str, factory: Callable[..., Policy]) -> None:
 def policy_names() -> list[str]:
     """Registered policy names."""
     return sorted(_FACTORIES)
+
+
+def policy_factory(name: str) -> Callable[..., Policy]:
+    """The factory registered under ``name``."""
+    if name not in _FACTORIES:
+        raise ConfigError(
+            expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
+        )
+    return _FACTORIES[name]
 
 
 def make_policy(name: str, **kwargs: Any) -> Policy:

@@ -18,6 +18,7 @@ than ``safety_margin``) is infeasible; if none is feasible the teacher stops at 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -33,7 +34,14 @@ from pioneer.reward.density import DensityReward
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.world import State, World
 
-__all__ = ["Decision", "LookaheadTeacher", "TeacherConfig", "rollout_features"]
+__all__ = [
+    "Decision",
+    "LookaheadTeacher",
+    "TeacherConfig",
+    "default_reward",
+    "make_teacher",
+    "rollout_features",
+]
 
 F64 = NDArray[np.float64]
 ExtraScore = Callable[[Rollout, State, World], F64]
@@ -160,4 +168,55 @@ class LookaheadTeacher:
         )
 
 
-register_policy("teacher-rules", lambda **kw: LookaheadTeacher(None, name="teacher-rules", **kw))
+@functools.lru_cache(maxsize=8)
+def default_reward(scenario: str) -> DensityReward:
+    """The density reward fitted on the shipped demos of ``scenario`` (cached per process)."""
+    from pioneer.data import base_scenario, shipped_demos
+    from pioneer.demos.dataset import Dataset, feature_map
+
+    d = Dataset.load(shipped_demos(scenario))
+    fm = feature_map(default_features(scenario))
+    model = DensityReward().fit(fm.from_dataset(d), d.gamma, list(fm.names))
+    model.info_.update({"demos": f"shipped:{base_scenario(scenario)}", "features": fm.name})
+    return model
+
+
+def default_features(scenario: str) -> str:
+    """``xy`` for the static study, ``obs_action`` for the elevator scenarios."""
+    return "xy" if scenario.startswith("static") else "obs_action"
+
+
+def make_teacher(
+    scenario: str = "hr-rl",
+    reward: str | None = None,
+    density: bool = True,
+    goal: bool = True,
+    obstacle: bool = True,
+    human_model: str = "privileged",
+    name: str = "teacher",
+) -> LookaheadTeacher:
+    """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
+    the shipped demos; each term can be switched off (paper Table II)."""
+    model = None
+    if density:
+        model = DensityReward.load(reward) if reward else default_reward(scenario)
+    features = str(model.info_.get("features", default_features(scenario))) if model else "xy"
+    cfg = TeacherConfig(
+        human_model=human_model,
+        weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
+    )
+    return LookaheadTeacher(model, features=features, config=cfg, name=name)
+
+
+register_policy("teacher", make_teacher)
+register_policy(
+    "teacher-no-density",
+    functools.partial(make_teacher, density=False, name="teacher-no-density"),
+)
+register_policy(
+    "teacher-no-goal", functools.partial(make_teacher, goal=False, name="teacher-no-goal")
+)
+register_policy(
+    "teacher-no-obstacle",
+    functools.partial(make_teacher, obstacle=False, name="teacher-no-obstacle"),
+)

@@ -49,7 +49,6 @@ __all__ = ["ARRIVED", "GONE", "WALKING", "SocialForceConfig", "sfm_substep"]
 WALKING = 0  # moves toward its waypoints
 ARRIVED = 1  # reached its final goal; stays as a static obstacle
 GONE = 2  # left the map; ignored by forces, sensing and collisions
-SFM_SCRATCH_COLUMNS = 4  # fx, fy, ready, nearest-wall distance
 EXP_CUTOFF = -12.0  # repulsion terms below A·e^-12 (< 1e-5 m/s²) are skipped
 
 
@@ -110,18 +109,22 @@ class SocialForceConfig(Config):
 
 @njit(cache=True)
 def sfm_substep(
-    pos: NDArray[np.float64],  # (N, 2) [m], updated in place
-    vel: NDArray[np.float64],  # (N, 2) [m/s], updated in place
-    radius: NDArray[np.float64],  # (N,) [m]
-    vpref: NDArray[np.float64],  # (N,) [m/s]
-    waypoints: NDArray[np.float64],  # (N, W, 2) [m]
-    n_waypoints: NDArray[np.int64],  # (N,)
-    wp_index: NDArray[np.int64],  # (N,), updated in place
-    status: NDArray[np.int8],  # (N,), updated in place
-    delay: NDArray[np.float64],  # (N,) [s] a human starts walking at t >= delay
-    wait_for: NDArray[np.int64],  # (N, N) 1 where human i waits until human j left or arrived
-    home: NDArray[np.float64],  # (N, 2) [m] where a waiting human holds its position
-    scratch: NDArray[np.float64],  # (N, 4) work space (avoids an allocation per substep)
+    b: int,  # which world copy of the batch to advance
+    pos: NDArray[np.float64],  # (B, N, 2) [m], updated in place
+    vel: NDArray[np.float64],  # (B, N, 2) [m/s], updated in place
+    radius: NDArray[np.float64],  # (B, N) [m]
+    vpref: NDArray[np.float64],  # (B, N) [m/s]
+    waypoints: NDArray[np.float64],  # (B, N, W, 2) [m]
+    n_waypoints: NDArray[np.int64],  # (B, N)
+    wp_index: NDArray[np.int64],  # (B, N), updated in place
+    status: NDArray[np.int8],  # (B, N), updated in place
+    delay: NDArray[np.float64],  # (B, N) [s] a human starts walking at t >= delay
+    wait_for: NDArray[np.int64],  # (B, N, N) 1 where human i waits until human j left/arrived
+    home: NDArray[np.float64],  # (B, N, 2) [m] where a waiting human holds its position
+    fx: NDArray[np.float64],  # (N,) scratch: force x (no allocation per substep)
+    fy: NDArray[np.float64],  # (N,) scratch: force y
+    ready: NDArray[np.float64],  # (N,) scratch: 1 = walking to its waypoints, 0 = waiting
+    wall_d: NDArray[np.float64],  # (N,) scratch: nearest-wall distance at the substep start
     t_now: float,  # [s] time at the start of the substep
     rx: float,
     ry: float,
@@ -131,7 +134,11 @@ def sfm_substep(
     params: NDArray[np.float64],  # SocialForceConfig.as_array()
     h: float,  # [s]
 ) -> None:
-    """Advance all humans of one world copy by one substep ``h`` (in place)."""
+    """Advance all humans of world copy ``b`` by one substep ``h`` (in place).
+
+    Whole batch arrays and an index are passed (not per-copy slices): slicing 11 arrays per
+    call cost more than the physics in the teacher's 120 × 30 substeps.
+    """
     tau = params[0]
     a_h = params[1]
     b_h = params[2]
@@ -144,67 +151,63 @@ def sfm_substep(
     goal_tol = params[9]
     settle_v = params[10]
     settle_d = params[11]
-    n = pos.shape[0]
+    n = pos.shape[1]
     m = walls.shape[0]
-    if scratch.shape[0] < n or scratch.shape[1] < SFM_SCRATCH_COLUMNS:
-        raise ValueError("sfm_substep: scratch must have shape (N, SFM_SCRATCH_COLUMNS)")
-    fx = scratch[:, 0]
-    fy = scratch[:, 1]
-    ready = scratch[:, 2]  # 1.0 = walking toward its waypoints, 0.0 = waiting or stopped
-    wall_d = scratch[:, 3]  # distance to the nearest wall at the start of the substep [m]
+    if fx.shape[0] < n or fy.shape[0] < n or ready.shape[0] < n or wall_d.shape[0] < n:
+        raise ValueError("sfm_substep: scratch arrays must have length >= N")
     for i in range(n):
         fx[i] = 0.0
         fy[i] = 0.0
         wall_d[i] = np.inf
-        r_i = status[i] == WALKING and t_now >= delay[i]
+        r_i = status[b, i] == WALKING and t_now >= delay[b, i]
         for j in range(n):
-            if wait_for[i, j] and status[j] == WALKING:
+            if wait_for[b, i, j] and status[b, j] == WALKING:
                 r_i = False
         ready[i] = 1.0 if r_i else 0.0
     # Forces are computed from the positions at the start of the substep for every human.
     for i in range(n):
-        if status[i] != WALKING:
+        if status[b, i] != WALKING:
             continue
-        px = pos[i, 0]
-        py = pos[i, 1]
+        px = pos[b, i, 0]
+        py = pos[b, i, 1]
         if ready[i] > 0.0:
             # Waypoint bookkeeping: pass intermediate waypoints, stop at the final goal.
-            k = wp_index[i]
+            k = wp_index[b, i]
             while True:
-                gx = waypoints[i, k, 0]
-                gy = waypoints[i, k, 1]
+                gx = waypoints[b, i, k, 0]
+                gy = waypoints[b, i, k, 1]
                 dg = norm2d(gx - px, gy - py)
-                last = k >= n_waypoints[i] - 1
+                last = k >= n_waypoints[b, i] - 1
                 if last:
                     break
                 if dg < wp_tol:
                     k += 1
                 else:
                     break
-            wp_index[i] = k
+            wp_index[b, i] = k
             if last and dg < goal_tol:
-                status[i] = ARRIVED
-                vel[i, 0] = 0.0
-                vel[i, 1] = 0.0
+                status[b, i] = ARRIVED
+                vel[b, i, 0] = 0.0
+                vel[b, i, 1] = 0.0
                 continue
         else:
             # Waiting: hold the home position by the same social-force drive.
-            gx = home[i, 0]
-            gy = home[i, 1]
+            gx = home[b, i, 0]
+            gy = home[b, i, 1]
             dg = norm2d(gx - px, gy - py)
             if dg < 0.05:
                 dg = 0.0
         ex = (gx - px) / dg if dg > 0.0 else 0.0
         ey = (gy - py) / dg if dg > 0.0 else 0.0
-        ax = (vpref[i] * ex - vel[i, 0]) / tau
-        ay = (vpref[i] * ey - vel[i, 1]) / tau
+        ax = (vpref[b, i] * ex - vel[b, i, 0]) / tau
+        ay = (vpref[b, i] * ey - vel[b, i, 1]) / tau
         for j in range(n):
-            if j == i or status[j] == GONE:
+            if j == i or status[b, j] == GONE:
                 continue
-            dx = px - pos[j, 0]
-            dy = py - pos[j, 1]
+            dx = px - pos[b, j, 0]
+            dy = py - pos[b, j, 1]
             d = norm2d(dx, dy)
-            z = (radius[i] + radius[j] - d) / b_h
+            z = (radius[b, i] + radius[b, j] - d) / b_h
             if d > 1e-9 and z > EXP_CUTOFF:
                 mag = a_h * math.exp(z)
                 ax += mag * dx / d
@@ -212,7 +215,7 @@ def sfm_substep(
         dx = px - rx
         dy = py - ry
         d = norm2d(dx, dy)
-        z = (radius[i] + r_robot - d) / b_r
+        z = (radius[b, i] + r_robot - d) / b_r
         if d > 1e-9 and z > EXP_CUTOFF:
             mag = a_r * math.exp(z)
             ax += mag * dx / d
@@ -225,7 +228,7 @@ def sfm_substep(
             dy = py - cy
             d = norm2d(dx, dy)
             wall_d[i] = min(wall_d[i], d)
-            z = (radius[i] - d) / b_w
+            z = (radius[b, i] - d) / b_w
             if d > 1e-9 and z > EXP_CUTOFF:
                 mag = a_w * math.exp(z)
                 ax += mag * dx / d
@@ -233,122 +236,62 @@ def sfm_substep(
         fx[i] = ax
         fy[i] = ay
     for i in range(n):
-        if status[i] != WALKING:
+        if status[b, i] != WALKING:
             continue
-        vx = vel[i, 0] + fx[i] * h
-        vy = vel[i, 1] + fy[i] * h
+        vx = vel[b, i, 0] + fx[i] * h
+        vy = vel[b, i, 1] + fy[i] * h
         sp = norm2d(vx, vy)
-        vmax = cap * vpref[i]
+        vmax = cap * vpref[b, i]
         if sp > vmax:
             vx *= vmax / sp
             vy *= vmax / sp
-        px = pos[i, 0] + vx * h
-        py = pos[i, 1] + vy * h
-        # Hard walls (skipped when the body was clear of every wall by more than its step).
-        if wall_d[i] - norm2d(vx * h, vy * h) > radius[i]:
-            pos[i, 0] = px
-            pos[i, 1] = py
-            vel[i, 0] = vx
-            vel[i, 1] = vy
-            _settle_and_leave(
-                i,
-                px,
-                py,
-                vx,
-                vy,
-                pos,
-                vel,
-                waypoints,
-                n_waypoints,
-                wp_index,
-                status,
-                ready,
-                radius,
-                bounds,
-                settle_v,
-                settle_d,
-            )
-            continue
-        # Hard walls: project an overlapping body back to contact, drop the inward velocity.
-        for _ in range(2):  # a second pass only if the first one moved the body (corners)
-            moved = False
-            for w in range(m):
-                cx, cy = closest_point_on_segment(
-                    px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
-                )
-                dx = px - cx
-                dy = py - cy
-                d = norm2d(dx, dy)
-                if d < radius[i] and d > 1e-12:
-                    nx = dx / d
-                    ny = dy / d
-                    px = cx + nx * radius[i]
-                    py = cy + ny * radius[i]
-                    moved = True
-                    vn = vx * nx + vy * ny
-                    if vn < 0.0:
-                        vx -= vn * nx
-                        vy -= vn * ny
-            if not moved:
-                break
-        pos[i, 0] = px
-        pos[i, 1] = py
-        vel[i, 0] = vx
-        vel[i, 1] = vy
-        _settle_and_leave(
-            i,
-            px,
-            py,
-            vx,
-            vy,
-            pos,
-            vel,
-            waypoints,
-            n_waypoints,
-            wp_index,
-            status,
-            ready,
-            radius,
-            bounds,
-            settle_v,
-            settle_d,
+        px = pos[b, i, 0] + vx * h
+        py = pos[b, i, 1] + vy * h
+        # Hard walls: project an overlapping body back to contact and drop its inward velocity
+        # (skipped when the body was clear of every wall by more than its step).
+        if wall_d[i] - norm2d(vx * h, vy * h) <= radius[b, i]:
+            for _ in range(2):  # a second pass only if the first one moved the body (corners)
+                moved = False
+                for w in range(m):
+                    cx, cy = closest_point_on_segment(
+                        px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+                    )
+                    dx = px - cx
+                    dy = py - cy
+                    d = norm2d(dx, dy)
+                    if d < radius[b, i] and d > 1e-12:
+                        nx = dx / d
+                        ny = dy / d
+                        px = cx + nx * radius[b, i]
+                        py = cy + ny * radius[b, i]
+                        moved = True
+                        vn = vx * nx + vy * ny
+                        if vn < 0.0:
+                            vx -= vn * nx
+                            vy -= vn * ny
+                if not moved:
+                    break
+        pos[b, i, 0] = px
+        pos[b, i, 1] = py
+        vel[b, i, 0] = vx
+        vel[b, i, 1] = vy
+        if ready[i] > 0.0 and norm2d(vx, vy) < settle_v:
+            # Stalled near its target (a jam in a full cabin): take the target as reached.
+            k = wp_index[b, i]
+            dg = math.hypot(waypoints[b, i, k, 0] - px, waypoints[b, i, k, 1] - py)
+            if dg < settle_d:
+                if k >= n_waypoints[b, i] - 1:
+                    status[b, i] = ARRIVED
+                    vel[b, i, 0] = 0.0
+                    vel[b, i, 1] = 0.0
+                else:
+                    wp_index[b, i] = k + 1
+        # Leaving: only a human on its last leg, once its body is fully outside the map.
+        r = radius[b, i]
+        outside = (
+            px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
         )
-
-
-@njit(cache=True, inline="always")
-def _settle_and_leave(
-    i: int,
-    px: float,
-    py: float,
-    vx: float,
-    vy: float,
-    pos: NDArray[np.float64],
-    vel: NDArray[np.float64],
-    waypoints: NDArray[np.float64],
-    n_waypoints: NDArray[np.int64],
-    wp_index: NDArray[np.int64],
-    status: NDArray[np.int8],
-    ready: NDArray[np.float64],
-    radius: NDArray[np.float64],
-    bounds: NDArray[np.float64],
-    settle_v: float,
-    settle_d: float,
-) -> None:
-    if ready[i] > 0.0 and norm2d(vx, vy) < settle_v:
-        # Stalled near its target (a jam in a full cabin): take the target as reached.
-        k = wp_index[i]
-        dg = math.hypot(waypoints[i, k, 0] - px, waypoints[i, k, 1] - py)
-        if dg < settle_d:
-            if k >= n_waypoints[i] - 1:
-                status[i] = ARRIVED
-                vel[i, 0] = 0.0
-                vel[i, 1] = 0.0
-            else:
-                wp_index[i] = k + 1
-    # Leaving: only a human on its last leg, once its body is fully outside the map.
-    r = radius[i]
-    outside = px < bounds[0] - r or px > bounds[1] + r or py < bounds[2] - r or py > bounds[3] + r
-    if outside and ready[i] > 0.0 and wp_index[i] >= n_waypoints[i] - 1:
-        status[i] = GONE
-        vel[i, 0] = 0.0
-        vel[i, 1] = 0.0
+        if outside and ready[i] > 0.0 and wp_index[b, i] >= n_waypoints[b, i] - 1:
+            status[b, i] = GONE
+            vel[b, i, 0] = 0.0
+            vel[b, i, 1] = 0.0

@@ -30,7 +30,7 @@ from pioneer.sim.geometry import (
     segment_segment_distance,
     swept_point_distance,
 )
-from pioneer.sim.humans import GONE, SFM_SCRATCH_COLUMNS, SocialForceConfig, sfm_substep
+from pioneer.sim.humans import GONE, SocialForceConfig, sfm_substep
 from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
 from pioneer.sim.robot import RobotConfig, clip_command, integrate_unicycle, validate_command
 
@@ -233,7 +233,10 @@ def _step_kernel(
     m = walls.shape[0]
     h = dt / n_sub
     old = np.empty((n_h, 2))
-    scratch = np.empty((n_h, SFM_SCRATCH_COLUMNS))
+    fx = np.empty(n_h)
+    fy = np.empty(n_h)
+    ready = np.empty(n_h)
+    wall_d = np.empty(n_h)
     was_present = np.empty(n_h, dtype=np.bool_)
     for b in range(n_b):
         x = robot[b, 0]
@@ -250,18 +253,22 @@ def _step_kernel(
                 old[i, 1] = hpos[b, i, 1]
                 was_present[i] = hstatus[b, i] != GONE
             sfm_substep(
-                hpos[b],
-                hvel[b],
-                hrad[b],
-                hvpref[b],
-                hwp[b],
-                hnwp[b],
-                hwpi[b],
-                hstatus[b],
-                hdelay[b],
-                hwait[b],
-                hhome[b],
-                scratch,
+                b,
+                hpos,
+                hvel,
+                hrad,
+                hvpref,
+                hwp,
+                hnwp,
+                hwpi,
+                hstatus,
+                hdelay,
+                hwait,
+                hhome,
+                fx,
+                fy,
+                ready,
+                wall_d,
                 t[b] + s * h,
                 x,
                 y,

@@ -1,0 +1,273 @@
+"""The evaluation harness: N seeds × M trials per scenario and policy, in parallel, resumable.
+
+Every episode is identified by (scenario, policy label, seed, trial); its environment seed is
+derived deterministically from (scenario, seed, trial), so any episode can be replayed alone
+(`episode_seed`) and every policy meets the same initial states. Finished episodes are
+appended to ``episodes.jsonl`` by the parent process as they arrive (one JSON object a line,
+flushed and fsynced), so an interrupted run resumes where it stopped; a malformed line is
+reported with its line number, never skipped. Backends: local processes (default) or a Ray
+cluster (extra ``distributed``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import json
+import multiprocessing as mp
+import os
+import time
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from pioneer.errors import ConfigError, DataError, expect
+
+__all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
+
+EPISODES_FILE = "episodes.jsonl"
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicySpec:
+    """A policy by registered name, its keyword arguments (JSON-able) and its row label."""
+
+    name: str
+    kwargs: tuple[tuple[str, Any], ...] = ()
+    label: str = ""
+
+    @property
+    def row(self) -> str:
+        """The label used in records and tables."""
+        return self.label or self.name
+
+    @classmethod
+    def make(cls, name: str, label: str = "", **kwargs: Any) -> PolicySpec:
+        """Convenience constructor with keyword arguments."""
+        return cls(name, tuple(sorted(kwargs.items())), label)
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """One episode to run."""
+
+    scenario: str
+    policy: PolicySpec
+    seed: int
+    trial: int
+
+    @property
+    def key(self) -> tuple[str, str, int, int]:
+        """Identity of the episode in ``episodes.jsonl``."""
+        return (self.scenario, self.policy.row, self.seed, self.trial)
+
+
+def episode_seed(scenario: str, seed: int, trial: int) -> int:
+    """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` (deterministic)."""
+    ss = np.random.SeedSequence([zlib.crc32(scenario.encode()), int(seed), int(trial)])
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+# ------------------------------------------------------------------------------ worker side
+_POLICY_CACHE: dict[tuple[str, PolicySpec], Any] = {}
+
+
+def _make_policy(spec: PolicySpec, scenario: str) -> Any:
+    key = (scenario, spec)
+    if key not in _POLICY_CACHE:
+        import pioneer.control  # noqa: F401  (registers the policies)
+        from pioneer.control.policy import policy_factory
+
+        factory = policy_factory(spec.name)
+        kwargs = dict(spec.kwargs)
+        if "scenario" in inspect.signature(factory).parameters:
+            kwargs["scenario"] = scenario
+        pol = factory(**kwargs)
+        if spec.label:
+            pol.name = spec.label
+        _POLICY_CACHE[key] = pol
+    return _POLICY_CACHE[key]
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Run one episode and return its JSON-able record."""
+    from pioneer.eval.episode import run_episode
+
+    policy = _make_policy(task.policy, task.scenario)
+    t0 = time.perf_counter()
+    rec, _ = run_episode(task.scenario, policy, episode_seed(task.scenario, task.seed, task.trial))
+    wall = time.perf_counter() - t0
+    d = rec.to_dict()
+    d.update(
+        policy=task.policy.row,
+        seed=task.seed,
+        trial=task.trial,
+        episode_seed=episode_seed(task.scenario, task.seed, task.trial),
+        wall_time_s=wall,
+        decision_ms=1000.0 * wall / max(rec.steps, 1),
+    )
+    return d
+
+
+# ------------------------------------------------------------------------------ records file
+def read_records(path: str | Path) -> list[dict[str, Any]]:
+    """All records of an ``episodes.jsonl``; a malformed line raises :class:`DataError`.
+
+    A last line without a newline (a write cut by a crash) is dropped with a warning on
+    stderr, since its episode will simply be run again.
+    """
+    p = Path(path)
+    if not p.exists():
+        return []
+    text = p.read_text()
+    lines = text.split("\n")
+    partial = lines[-1] if lines[-1] else None
+    out = []
+    for i, line in enumerate(lines[:-1], start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "one JSON record",
+                    line[:60],
+                    "delete or repair that line, then resume",
+                )
+            ) from exc
+        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
+        if missing:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "fields scenario/policy/seed/trial/event",
+                    sorted(missing),
+                    "delete that line",
+                )
+            )
+        out.append(rec)
+    if partial is not None:
+        import sys
+
+        print(
+            f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
+            file=sys.stderr,
+        )
+        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
+            fh.write("\n".join(lines[:-1]) + ("\n" if len(lines) > 1 else ""))
+    return out
+
+
+def _append(fh: Any, rec: dict[str, Any]) -> None:
+    fh.write(json.dumps(rec) + "\n")
+    fh.flush()
+    os.fsync(fh.fileno())
+
+
+# ------------------------------------------------------------------------------ driver
+def _tasks(
+    scenarios: Sequence[str], policies: Sequence[PolicySpec], seeds: int, trials: int
+) -> list[Task]:
+    return [
+        Task(sc, pol, s, t)
+        for sc in scenarios
+        for pol in policies
+        for s in range(seeds)
+        for t in range(trials)
+    ]
+
+
+def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
+    if workers <= 1:
+        for t in tasks:
+            yield run_task(t)
+        return
+    # One BLAS thread per worker: the workers already use every core.
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending: set[Future[dict[str, Any]]] = set()
+        it = iter(tasks)
+        for t in it:  # keep a bounded queue so an interrupt loses little work
+            pending.add(pool.submit(run_task, t))
+            if len(pending) >= 4 * workers:
+                break
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                yield f.result()
+                nxt = next(it, None)
+                if nxt is not None:
+                    pending.add(pool.submit(run_task, nxt))
+
+
+def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
+    try:
+        import ray
+    except ImportError as exc:
+        raise ConfigError(
+            expect(
+                "backend",
+                "ray installed",
+                "not installed",
+                "pip install 'pioneer-nav[distributed]'",
+            )
+        ) from exc
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    remote = ray.remote(run_task)
+    refs = [remote.remote(t) for t in tasks]
+    while refs:
+        done, refs = ray.wait(refs, num_returns=1)
+        yield ray.get(done[0])
+
+
+def evaluate(
+    scenarios: Sequence[str],
+    policies: Sequence[PolicySpec],
+    seeds: int,
+    trials: int,
+    out_dir: str | Path,
+    workers: int | None = None,
+    backend: str = "process",
+    ray_address: str | None = None,
+    progress: bool = True,
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run (or resume) the evaluation; returns every record (old and new)."""
+    if seeds < 1 or trials < 1:
+        raise ConfigError(
+            expect("seeds/trials", "integers >= 1", (seeds, trials), "fix the counts")
+        )
+    if backend not in ("process", "ray"):
+        raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / EPISODES_FILE
+    records = read_records(path)
+    done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
+    todo = [t for t in _tasks(scenarios, policies, seeds, trials) if t.key not in done]
+    n_workers = workers or os.cpu_count() or 1
+    stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
+    total = len(done) + len(todo)
+    with (
+        open(path, "a") as fh,
+        tqdm(
+            total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
+        ) as bar,
+    ):
+        for rec in stream:
+            _append(fh, rec)
+            records.append(rec)
+            if on_record is not None:
+                on_record(rec)
+            bar.update(1)
+    return records
