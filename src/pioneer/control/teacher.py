@@ -199,7 +199,12 @@ def make_teacher(
     the shipped demos; each term can be switched off (paper Table II)."""
     model = None
     if density:
-        model = DensityReward.load(reward) if reward else default_reward(scenario)
+        # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
+        model = (
+            DensityReward.load(reward.format(scenario=scenario))
+            if reward
+            else default_reward(scenario)
+        )
     features = str(model.info_.get("features", default_features(scenario))) if model else "xy"
     cfg = TeacherConfig(
         human_model=human_model,
