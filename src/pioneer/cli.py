@@ -64,6 +64,17 @@ def _cmd_demos_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_teleop(args: argparse.Namespace) -> int:
+    from pioneer.demos.teleop import TeleopSession
+
+    cmd = " ".join(["pioneer", *sys.argv[1:]]) if sys.argv[0].endswith("pioneer") else ""
+    session = TeleopSession(
+        args.scenario, args.out, seed=args.seed, max_episodes=args.max_episodes, command=cmd
+    )
+    print(json.dumps(session.run()))
+    return 0
+
+
 def _default_features(scenarios: tuple[str, ...]) -> str:
     return "xy" if scenarios == ("static",) else "obs_action"
 
@@ -177,6 +188,13 @@ def _parser() -> argparse.ArgumentParser:
     sh = demos.add_parser("show", help="summary of a dataset file")
     sh.add_argument("demos")
     sh.set_defaults(func=_cmd_demos_show)
+
+    t = sub.add_parser("teleop", help="drive with the keyboard and record labelled demos")
+    t.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, static, …")
+    t.add_argument("--out", required=True, help="dataset .npz (appended to after every episode)")
+    t.add_argument("--seed", type=int, default=0, help="episode k is seeded seed + k")
+    t.add_argument("--max-episodes", type=int, help="stop after this many saved episodes")
+    t.set_defaults(func=_cmd_teleop)
 
     reward = sub.add_parser("reward", help="the learned density reward").add_subparsers(
         dest="reward_command", required=True

@@ -63,7 +63,8 @@ KEYS = ("up", "down", "left", "right", "space", "n", "b", "r", "escape")
 V_STEP = 0.1  # [m/s] per UP/DOWN press
 OMEGA_STEP = 0.2  # [rad/s] per LEFT/RIGHT press
 FPS = 10  # ticks per second with realtime=True (the control rate, Δt = 0.1 s)
-STATUS_HEIGHT = 46  # [px] text area below the scene
+STATUS_HEIGHT = 68  # [px] text area below the scene (three lines)
+MIN_WIDTH = 600  # [px] the text needs this much; narrower scenes are centred
 MESSAGE_TICKS = 40  # how long an end-of-episode message stays on screen
 INSTALL_HINT = "pip install 'pioneer-nav[teleop]'"
 
@@ -216,8 +217,18 @@ class TeleopSession:
 
         self._pg = _import_pygame()
         pg = self._pg
-        pg.display.init()
-        pg.font.init()
+        try:
+            pg.display.init()
+            pg.font.init()
+        except pg.error as exc:
+            raise PioneerError(
+                expect(
+                    "teleop window",
+                    "a display pygame can open",
+                    str(exc),
+                    "run it in a desktop session (SDL_VIDEODRIVER=dummy: headless, no window)",
+                )
+            ) from exc
         self._keymap = {
             pg.K_UP: "up",
             pg.K_DOWN: "down",
@@ -306,12 +317,13 @@ class TeleopSession:
         }
         if old_meta.get("source") != "teleop":
             meta["source"] = "merge"
-            meta["parts"] = [*old_meta.get("parts", [old_meta.get("source", "?")]), "teleop"]
+            parts = list(old_meta.get("parts", [old_meta.get("source", "?")]))
+            meta["parts"] = parts if "teleop" in parts else [*parts, "teleop"]
         dataclasses.replace(merged, meta=meta).save(self.out)
 
     # ------------------------------------------------------------------ the loop
     def _poll(self) -> list[str]:
-        """Key names and ``"quit"`` from the pending pygame events, in order."""
+        """Key names of the pending pygame events, in order (closing the window is ESC)."""
         pg = self._pg
         keys: list[str] = []
         for event in pg.event.get():
@@ -417,7 +429,7 @@ class TeleopSession:
         elif c.span_open:
             mark = "   NEGATIVE (span)"
         return (
-            f"v {c.v:.1f} m/s   w {c.omega:+.2f} rad/s   t {self.time:4.1f} s   "
+            f"v {c.v:.1f} m/s   ω {c.omega:+.2f} rad/s   t {self.time:4.1f} s   "
             f"episode {self.episodes_started}   saved {self.episodes_saved}{mark}"
         )
 
@@ -429,25 +441,24 @@ class TeleopSession:
         trail = np.asarray(self._episode.trail, dtype=np.float64).reshape(-1, 2)
         img = render_frame(self.env.world, self.env.state, size=self.window_size, trail=trail)
         h, w = img.shape[:2]
-        if self._screen is None or self._screen.get_size() != (w, h + STATUS_HEIGHT):
-            self._screen = pg.display.set_mode((w, h + STATUS_HEIGHT))
+        size = (max(w, MIN_WIDTH), h + STATUS_HEIGHT)
+        if self._screen is None or self._screen.get_size() != size:
+            self._screen = pg.display.set_mode(size)
             pg.display.set_caption(f"pioneer teleop · {self.cfg.name} · {self.out.name}")
         screen = self._screen
         screen.fill((255, 255, 255))
-        screen.blit(pg.image.frombuffer(img.tobytes(), (w, h), "RGB"), (0, 0))
-        pg.draw.line(screen, (180, 180, 180), (0, h), (w, h))
+        screen.blit(pg.image.frombuffer(img.tobytes(), (w, h), "RGB"), ((size[0] - w) // 2, 0))
+        pg.draw.line(screen, (180, 180, 180), (0, h), (size[0], h))
         red = self.controller.marking_negative
-        line = self._font.render(self.status_line(), True, (200, 0, 0) if red else (0, 0, 0))
-        screen.blit(line, (6, h + 4))
+        lines = [(self.status_line(), (200, 0, 0) if red else (0, 0, 0))]
         if self._message_ticks > 0:
             self._message_ticks -= 1
-            help_text = self.message
+            lines.append((self.message, (0, 90, 160)))
         else:
-            help_text = (
-                "UP/DOWN speed  LEFT/RIGHT turn  SPACE stop  N negative episode  "
-                "B negative span  R restart  ESC quit"
-            )
-        screen.blit(self._font.render(help_text, True, (90, 90, 90)), (6, h + 25))
+            lines.append(("UP/DOWN speed   LEFT/RIGHT turn   SPACE stop", (90, 90, 90)))
+        lines.append(("N negative episode   B negative span   R restart   ESC quit", (90, 90, 90)))
+        for i, (text, colour) in enumerate(lines):
+            screen.blit(self._font.render(text, True, colour), (8, h + 6 + 20 * i))
         pg.display.flip()
 
     def screenshot(self, path: str | os.PathLike[str]) -> None:

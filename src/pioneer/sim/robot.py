@@ -1,7 +1,7 @@
 """Unicycle robot: configuration, command clipping and exact integration (SPEC 1.1).
 
 Kinematics (paper §III-A): ṗx = v cos θ, ṗy = v sin θ, θ̇ = ω. With the command held over a
-step of length h the solution is an arc (ω ≠ 0) or a straight line (ω ≈ 0); we integrate it
+step of length h the solution is an arc (ω ≠ 0) or a straight line (ω = 0); we integrate it
 exactly rather than with an Euler step, so a rollout at 0.3 s matches three steps at 0.1 s.
 """
 
@@ -18,8 +18,6 @@ from pioneer.config import Config, check_nonnegative, check_positive
 from pioneer.errors import CommandError, ConfigError, expect
 
 __all__ = ["RobotConfig", "clip_command", "integrate_unicycle", "validate_command", "wrap_angle"]
-
-OMEGA_EPS = 1e-9  # [rad/s] below this |ω| the arc is integrated as a straight line
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,13 +87,17 @@ def wrap_angle(a: float) -> float:
 def integrate_unicycle(
     x: float, y: float, th: float, v: float, w: float, h: float
 ) -> tuple[float, float, float]:
-    """Exact unicycle motion over ``h`` seconds with ``(v, ω)`` held constant."""
-    if abs(w) < OMEGA_EPS:
-        return x + v * h * math.cos(th), y + v * h * math.sin(th), th
+    """Exact unicycle motion over ``h`` seconds with ``(v, ω)`` held constant.
+
+    The arc's chord has length v·h·sinc(ωh/2) and points along θ + ωh/2; written this way it
+    has no cancellation for small ω (the textbook (v/ω)(sin θ' − sin θ) loses all precision
+    near ω → 0) and needs no straight-line special case.
+    """
+    half = 0.5 * w * h
+    # sinc(half); below 1e-4 its Taylor series 1 − half²/6 is exact to < 1e-17.
+    f = math.sin(half) / half if abs(half) > 1e-4 else 1.0 - half * half / 6.0
+    chord = v * h * f
+    mid = th + half
     th1 = th + w * h
-    r = v / w
-    return (
-        x + r * (math.sin(th1) - math.sin(th)),
-        y - r * (math.cos(th1) - math.cos(th)),
-        wrap_angle(th1),
-    )
+    th1 = th1 if -math.pi < th1 <= math.pi else wrap_angle(th1)  # exact when no wrap is needed
+    return x + chord * math.cos(mid), y + chord * math.sin(mid), th1
