@@ -14,8 +14,8 @@ $(STAMP): pyproject.toml
 
 ## Run the main job on the shipped defaults (writes into out/demo).
 demo: $(STAMP)
-	$(VENV)/bin/pioneer run --scenario hr-rl --policy goal --seed 0 \
-		--gif out/demo/hr-rl.gif --png out/demo/hr-rl.png
+	$(VENV)/bin/pioneer reproduce --profile quick --out out/demo
+	@echo "report: out/demo/index.md"
 
 ## Lint, type-check and run the whole test suite.
 test: $(STAMP) lint typecheck pytest

@@ -15,7 +15,14 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["Policy", "make_policy", "policy_factory", "policy_names", "register_policy"]
+__all__ = [
+    "Policy",
+    "build_policy",
+    "make_policy",
+    "policy_factory",
+    "policy_names",
+    "register_policy",
+]
 
 
 @runtime_checkable
@@ -53,6 +60,17 @@ def policy_factory(name: str) -> Callable[..., Policy]:
             expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
         )
     return _FACTORIES[name]
+
+
+def build_policy(name: str, scenario: str | None = None, **kwargs: Any) -> Policy:
+    """Construct ``name``, passing ``scenario`` only to factories that take it (the teacher
+    needs the scenario to pick its reward; the go-to-goal controller does not)."""
+    import inspect
+
+    factory = policy_factory(name)
+    if scenario is not None and "scenario" in inspect.signature(factory).parameters:
+        kwargs["scenario"] = scenario
+    return factory(**kwargs)
 
 
 def make_policy(name: str, **kwargs: Any) -> Policy:

@@ -12,7 +12,6 @@ cluster (extra ``distributed``).
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import json
 import multiprocessing as mp
 import os
@@ -81,17 +80,19 @@ def _make_policy(spec: PolicySpec, scenario: str) -> Any:
     key = (scenario, spec)
     if key not in _POLICY_CACHE:
         import pioneer.control  # noqa: F401  (registers the policies)
-        from pioneer.control.policy import policy_factory
+        from pioneer.control.policy import build_policy
 
-        factory = policy_factory(spec.name)
-        kwargs = dict(spec.kwargs)
-        if "scenario" in inspect.signature(factory).parameters:
-            kwargs["scenario"] = scenario
-        pol = factory(**kwargs)
+        pol = build_policy(spec.name, scenario, **dict(spec.kwargs))
         if spec.label:
             pol.name = spec.label
         _POLICY_CACHE[key] = pol
     return _POLICY_CACHE[key]
+
+
+def _worker_init() -> None:
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
 
 
 def run_task(task: Task) -> dict[str, Any]:
@@ -193,7 +194,7 @@ def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
         pending: set[Future[dict[str, Any]]] = set()
         it = iter(tasks)
         for t in it:  # keep a bounded queue so an interrupt loses little work
