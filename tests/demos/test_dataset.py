@@ -351,11 +351,6 @@ def test_saved_file_is_self_describing_without_pickle(tmp_path, rng):
     assert meta["scenarios"] == ["hr-rl"]
 
 
-@pytest.mark.xfail(
-    reason="BUG: Dataset.save lets stale n_samples/n_positive/n_negative of self.meta (from a "
-    "loaded file) override the freshly computed counts",
-    strict=True,
-)
 def test_saved_counts_describe_the_saved_rows(tmp_path, rng):
     d = make_dataset(12, rng, gamma=np.tile([1.0, -1.0], 6))
     d.save(tmp_path / "a.npz")
@@ -465,11 +460,6 @@ def test_load_missing_file(tmp_path):
     tu.assert_house_message(str(exc.value), "nope.npz")
 
 
-@pytest.mark.xfail(
-    reason="BUG: Dataset.load catches BadZipFile/ValueError/OSError/EOFError but not "
-    "zlib.error, so a file with corrupted deflate data escapes as zlib.error",
-    strict=True,
-)
 def test_load_refuses_corrupted_compressed_bytes(tmp_path, rng):
     p = tmp_path / "c.npz"
     make_dataset(200, rng).save(p)

@@ -374,11 +374,6 @@ def test_kmeans_medoids_are_sorted_distinct_rows(rng):
     np.testing.assert_array_equal(idx, kmeans_medoid_indices(z, 25, np.random.default_rng(0)))
 
 
-@pytest.mark.xfail(
-    reason="BUG: farthest_point_indices repeats indices once every distinct point is taken "
-    "(argmax of an all-zero distance vector), so FPS inducing sets hold duplicate points",
-    strict=True,
-)
 def test_fps_with_repeated_rows_still_gives_distinct_points():
     rng = np.random.default_rng(0)
     z = np.repeat(rng.normal(size=(5, 2)), 10, axis=0)  # 50 rows, 5 distinct points
@@ -561,11 +556,6 @@ def test_load_refuses_missing_files_and_datasets(tmp_path):
     tu.assert_house_message(str(exc.value), "alpha")
 
 
-@pytest.mark.xfail(
-    reason="BUG: a model with no inducing points is refused with a message about 'mean' "
-    "('expected shape (3,), received (3,)') instead of naming alpha/inducing",
-    strict=True,
-)
 def test_load_refuses_a_model_without_samples_naming_alpha(tmp_path, rng):
     arrays, meta = _model_arrays(tmp_path, rng)
     for k in ("alpha", "leverage"):
@@ -576,21 +566,6 @@ def test_load_refuses_a_model_without_samples_naming_alpha(tmp_path, rng):
     tu.assert_house_message(str(exc.value), "alpha")
 
 
-def test_load_refuses_a_model_without_samples(tmp_path, rng):
-    arrays, meta = _model_arrays(tmp_path, rng)
-    for k in ("alpha", "leverage", "inducing"):
-        arrays[k] = arrays[k][:0]
-    with pytest.raises(DataError) as exc:
-        DensityReward.load(_write_model(tmp_path / "empty.npz", arrays, meta))
-    tu.assert_house_message(str(exc.value), "shape")
-
-
-@pytest.mark.xfail(
-    reason="BUG: DensityReward.load does not validate the metadata scalars scale and "
-    "length_scale: NaN/0/negative values load silently (rewards become NaN/inf, or raw() "
-    "raises ZeroDivisionError for length_scale 0)",
-    strict=True,
-)
 @pytest.mark.parametrize(
     ("key", "value"),
     [
@@ -610,11 +585,6 @@ def test_load_refuses_bad_metadata_scalars(tmp_path, rng, key, value):
     tu.assert_house_message(str(exc.value), key)
 
 
-@pytest.mark.xfail(
-    reason="BUG: DensityReward.load reads meta['config'], meta['feature_names'], "
-    "meta['length_scale'] … unchecked: a missing key escapes as KeyError, not DataError",
-    strict=True,
-)
 @pytest.mark.parametrize("key", ["config", "feature_names", "length_scale", "scale", "n_train"])
 def test_load_refuses_incomplete_metadata(tmp_path, rng, key):
     arrays, meta = _model_arrays(tmp_path, rng)

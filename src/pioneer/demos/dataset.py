@@ -14,6 +14,7 @@ import dataclasses
 import json
 import math
 import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -153,6 +154,7 @@ class Dataset:
     def save(self, path: str | Path) -> None:
         """Write the dataset (atomically)."""
         meta = {
+            **self.meta,  # free-form first: the computed fields below always win
             "format": FORMAT,
             "feature_names": observation_names(),
             "action_names": ["v", "omega"],
@@ -161,7 +163,6 @@ class Dataset:
             "n_samples": len(self),
             "n_positive": self.n_positive,
             "n_negative": self.n_negative,
-            **{k: v for k, v in self.meta.items() if k not in ("format", "scenarios")},
         }
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, **self._arrays(), metadata=np.array(json.dumps(meta)))
@@ -175,7 +176,7 @@ class Dataset:
         try:
             with np.load(p, allow_pickle=False) as f:
                 arrays = {k: f[k] for k in f.files}
-        except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
             raise DataError(
                 expect(
                     f"dataset {p}",
@@ -197,7 +198,11 @@ class Dataset:
         scenarios = tuple(meta.get("scenarios", ()))
         _validate(arrays, scenarios, str(p))
         extra = {k: v for k, v in meta.items() if k not in ("format", "scenarios")}
-        return cls(**{k: arrays[k] for k in _FIELDS}, scenarios=scenarios, meta=extra)
+        return cls(
+            **{k: arrays[k].astype(_dtype(k), copy=False) for k in _FIELDS},
+            scenarios=scenarios,
+            meta=extra,
+        )
 
     def summary(self) -> dict[str, Any]:
         """Counts per sign and scenario."""

@@ -89,7 +89,8 @@ def generate(
 
     def add(frames: list[Frame], gamma: float, ep_seed: int, limit: int) -> int:
         nonlocal episode
-        frames = frames[:limit]
+        # Truncating: positives keep their first frames, negatives the ones nearest the collision.
+        frames = frames[:limit] if gamma > 0 else frames[-limit:]
         for f in frames:
             cols["episode"].append(episode)
             cols["step"].append(f["step"])

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Self
 
@@ -75,14 +76,17 @@ class DensityConfig(Config):
 
 
 def farthest_point_indices(z: F64, k: int, rng: np.random.Generator) -> NDArray[np.int64]:
-    """Indices of ``k`` points chosen by farthest-point sampling (first point random)."""
+    """Indices of up to ``k`` distinct points by farthest-point sampling (first one random)."""
     n = z.shape[0]
     idx = np.empty(k, dtype=np.int64)
     idx[0] = rng.integers(n)
     d = np.einsum("ij,ij->i", z - z[idx[0]], z - z[idx[0]])
     for i in range(1, k):
-        idx[i] = int(np.argmax(d))
-        diff = z - z[idx[i]]
+        nxt = int(np.argmax(d))
+        if d[nxt] <= 0.0:  # every distinct point is taken (duplicated data): stop early
+            return idx[:i]
+        idx[i] = nxt
+        diff = z - z[nxt]
         np.minimum(d, np.einsum("ij,ij->i", diff, diff), out=d)
     return idx
 
@@ -120,6 +124,8 @@ def _median_difference(z: F64, rng: np.random.Generator, max_points: int = 1000)
     median *Euclidean* distance grows like √D and blurs a 31-D reward: held-out AUROC 0.79 vs
     0.99 on the HR-RL demos.)
     """
+    if z.shape[0] < 2:
+        return 1.0
     sub = z if z.shape[0] <= max_points else z[rng.choice(z.shape[0], max_points, replace=False)]
     iu = np.triu_indices(sub.shape[0], k=1)
     per_dim = [
@@ -310,7 +316,7 @@ class DensityReward:
         try:
             with np.load(p, allow_pickle=False) as f:
                 arrays = {k: f[k] for k in f.files}
-        except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
             raise DataError(
                 expect(
                     f"reward model {p}",
@@ -334,6 +340,21 @@ class DensityReward:
             )
         d = arrays["mean"].shape[0] if arrays["mean"].ndim == 1 else -1
         n_u = arrays["alpha"].shape[0] if arrays["alpha"].ndim == 1 else -1
+        if d < 1:
+            raise DataError(
+                expect(
+                    f"{p}: mean", "a feature vector (D,), D >= 1", arrays["mean"].shape, "re-fit"
+                )
+            )
+        if n_u < 1:
+            raise DataError(
+                expect(
+                    f"{p}: alpha",
+                    "at least one inducing point",
+                    arrays["alpha"].shape,
+                    "re-fit the model on some demos",
+                )
+            )
         shapes = {
             "mean": (d,),
             "std": (d,),
@@ -343,13 +364,35 @@ class DensityReward:
         }
         for k, shp in shapes.items():
             arr = arrays[k]
-            if d < 1 or n_u < 1 or arr.shape != shp:
+            if arr.shape != shp:
                 raise DataError(expect(f"{p}: {k}", f"shape {shp}", arr.shape, "re-fit the model"))
             if not np.all(np.isfinite(arr)):
                 raise DataError(expect(f"{p}: {k}", "finite values", "NaN/inf", "re-fit the model"))
         if np.any(np.abs(arrays["leverage"]) > 1) or np.any(arrays["std"] <= 0):
             raise DataError(
                 expect(f"{p}: leverage/std", "γ̃ in [-1, 1], std > 0", "out of range", "re-fit")
+            )
+        missing = sorted(
+            {"config", "feature_names", "length_scale", "scale", "n_train"} - set(meta)
+        )
+        if missing:
+            raise DataError(
+                expect(
+                    f"{p}: metadata",
+                    "config, feature_names, length_scale, scale, n_train",
+                    f"missing {missing}",
+                    "re-fit the model",
+                )
+            )
+        for key in ("length_scale", "scale"):
+            val = meta[key]
+            if not (isinstance(val, int | float) and np.isfinite(val) and val > 0):
+                raise DataError(
+                    expect(f"{p}: {key}", "a finite number > 0", val, "re-fit the model")
+                )
+        if len(meta["feature_names"]) != d:
+            raise DataError(
+                expect(f"{p}: feature_names", f"{d} names", len(meta["feature_names"]), "re-fit")
             )
         model = cls(DensityConfig.from_dict(meta["config"]))
         model.feature_names = list(meta["feature_names"])
