@@ -89,6 +89,8 @@ class Plan:
     breakdown_calls: int = 2000  # calls per run in the per-step breakdown
     breakdown_repeats: int = 9
     memory_repeats: int = 3
+    fit_repeats: int = 7
+    fit_large_repeats: int = 3
 
 
 FULL = Plan()
@@ -99,6 +101,8 @@ QUICK = Plan(
     batch_repeats=15,
     breakdown_repeats=3,
     memory_repeats=1,
+    fit_repeats=3,
+    fit_large_repeats=1,
 )
 
 
@@ -712,7 +716,100 @@ def bench_memory(plan: Plan) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------------
 # Driver
 
-BENCHMARKS = ("env_step", "pysocialforce_step", "raycast_batch", "world_step_batch", "memory")
+# --------------------------------------------------------------------------------------------
+# 5–7. density reward and teacher (issues 3 and 4)
+
+
+def _density_data(n: int, d: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Synthetic demos: features ~ N(0, I) in R^d, 80 % positive."""
+    rng = np.random.default_rng(seed)
+    return rng.normal(size=(n, d)), np.where(rng.random(n) < 0.8, 1.0, -1.0)
+
+
+def bench_density_fit(plan: Plan) -> dict[str, Any]:
+    """``DensityReward.fit`` on 1,000 samples (all inducing) and on 20,000 with 2,000 inducing."""
+    from pioneer.reward import DensityConfig, DensityReward
+
+    small = _density_data(1000, 31, SEED + 20)
+    large = _density_data(20000, 31, SEED + 21)
+    cases = {
+        "fit_1000": Case(lambda _: DensityReward().fit(*small)),
+        "fit_20000_2000": Case(
+            lambda _: DensityReward(DensityConfig(max_inducing=2000)).fit(*large)
+        ),
+    }
+    secs = time_cases({"fit_1000": cases["fit_1000"]}, plan.fit_repeats, warmup=1)
+    secs |= time_cases(
+        {"fit_20000_2000": cases["fit_20000_2000"]}, plan.fit_large_repeats, warmup=0
+    )
+    return {
+        "metrics": {
+            "s_fit_1000": metric(secs["fit_1000"], "s", ("<=", 0.5)),
+            "s_fit_20000_2000_inducing": metric(secs["fit_20000_2000"], "s", ("<=", 10.0)),
+        },
+        "info": {"features": 31, "inducing_selection": "kmeans medoids"},
+    }
+
+
+def bench_density_eval(plan: Plan) -> dict[str, Any]:
+    """Evaluate 1,200 queries (a teacher's 120 × 10 rollout states) against 1,000 inducing."""
+    from pioneer.reward import DensityReward
+
+    model = DensityReward().fit(*_density_data(1000, 31, SEED + 22))
+    q = _density_data(1200, 31, SEED + 23)[0]
+    model(q)
+    secs = time_cases({"eval": Case(lambda _: model(q))}, plan.batch_repeats, warmup=3)["eval"]
+    return {
+        "metrics": {"ms_eval_1200x1000": metric(secs * 1e3, "ms", ("<=", 2.0))},
+        "info": {"queries": 1200, "inducing": 1000, "dtype": "float32 evaluation"},
+    }
+
+
+def bench_teacher_decision(plan: Plan) -> dict[str, Any]:
+    """One teacher decision (120 candidates × 10 states: world step, rays, density, scoring),
+    and the same pieces alone, to show where the time goes."""
+    from pioneer.control.rollout import rollout
+    from pioneer.control.teacher import make_teacher, rollout_features
+
+    _, world, state = elevator_setup(SEED + 30)
+    teacher = make_teacher("hr-rl")
+    teacher.decide(world, state)
+    ro = rollout(world, state, teacher.candidates)
+    feats = rollout_features("obs_action", ro)
+    assert teacher.density is not None
+    density = teacher.density
+    cases = {
+        "decision": Case(lambda _: teacher.decide(world, state)),
+        "rollout": Case(lambda _: rollout(world, state, teacher.candidates)),
+        "density": Case(lambda _: density(feats)),
+    }
+    secs = time_cases(cases, plan.batch_repeats, warmup=3)
+    flops = 2 * feats.shape[0] * density.alpha_.shape[0] * feats.shape[1]  # type: ignore[union-attr]
+    return {
+        "metrics": {
+            "ms_decision": metric(secs["decision"] * 1e3, "ms", ("<=", 10.0)),
+            "ms_rollout_120x10": metric(secs["rollout"] * 1e3, "ms"),
+            "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
+        },
+        "info": {
+            "candidates": int(teacher.candidates.shape[0]),
+            "inducing": int(density.alpha_.shape[0]),  # type: ignore[union-attr]
+            "density_matmul_mflop": flops / 1e6,
+            "blas_threads": "1 (threadpoolctl, as the CLI and workers run)",
+        },
+    }
+
+
+BENCHMARKS = (
+    "env_step",
+    "pysocialforce_step",
+    "raycast_batch",
+    "world_step_batch",
+    "density_fit",
+    "density_eval",
+    "teacher_decision",
+    "memory",
+)
 
 
 def machine_info() -> dict[str, Any]:
@@ -768,6 +865,12 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
                 res = bench_raycast_batch(plan)
             elif name == "world_step_batch":
                 res = bench_world_step_batch(plan)
+            elif name == "density_fit":
+                res = bench_density_fit(plan)
+            elif name == "density_eval":
+                res = bench_density_eval(plan)
+            elif name == "teacher_decision":
+                res = bench_teacher_decision(plan)
             else:
                 res = bench_memory(plan)
         except Exception as exc:
@@ -912,6 +1015,9 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     names = list(args.only) if args.only else list(BENCHMARKS)
     plan = QUICK if args.quick else FULL
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")  # as the CLI and the evaluation workers run
 
     if args.output.exists():
         with contextlib.suppress(OSError, ValueError):
