@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from pioneer.errors import PioneerError
+from pioneer.errors import ConfigError, PioneerError, expect
 
 __all__ = ["main"]
 
@@ -22,6 +22,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scenario = get_scenario(args.scenario)
     abl = _ablation_kwargs(args)
+    if abl and not args.policy.startswith("teacher"):
+        raise ConfigError(
+            expect(
+                "--no-density/--no-goal/--no-obstacle",
+                "a teacher policy",
+                args.policy,
+                "drop the flags",
+            )
+        )
     policy = build_policy(args.policy, scenario.name, **abl)
     if abl:
         policy.name = args.policy + "".join(f"-no-{k}" for k in abl)

@@ -84,8 +84,13 @@ def rollout(
     wclear = np.full(c, np.inf)
     for k in range(n_steps):
         s = step(world, s, commands, dt=dt)
-        if cv:
+        if cv and state.n_humans:
             s.h_pos[moving] = (state.h_pos + v0 * (dt * (k + 1))).repeat(c, axis=0)[moving]
+            # The step checked collisions against frozen humans; check the moved ones too.
+            gap = np.linalg.norm(s.h_pos - s.robot[:, None, :2], axis=2) - s.h_radius
+            gap = np.where(moving, gap - world.sim.robot.radius, np.inf).min(axis=1)
+            np.minimum(s.clearance, gap, out=s.clearance)
+            np.logical_or(s.collided, gap < 0.0, out=s.collided)
         robot[:, k] = s.robot
         obs[:, k] = observe(world, s)
         np.minimum(clear, s.clearance, out=clear)

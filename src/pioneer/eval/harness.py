@@ -143,6 +143,10 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
                     "delete or repair that line, then resume",
                 )
             ) from exc
+        if not isinstance(rec, dict):
+            raise DataError(
+                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
+            )
         missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
         if missing:
             raise DataError(
@@ -250,6 +254,14 @@ def evaluate(
         )
     if backend not in ("process", "ray"):
         raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
+    import pioneer.control  # noqa: F401  (registers the policies)
+    from pioneer.control.policy import policy_factory
+    from pioneer.sim.scenarios import get_scenario
+
+    for sc in scenarios:  # fail before running anything, not hours in
+        get_scenario(sc)
+    for spec in policies:
+        policy_factory(spec.name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / EPISODES_FILE

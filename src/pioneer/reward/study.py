@@ -33,7 +33,7 @@ def run_static_study(
     z, g = fm.from_dataset(demos), demos.gamma
     pos = g > 0
     # Maps over (x, y) in metres want a finer length than the default (about 0.3 m here).
-    cfg = DensityConfig(length_scale_factor=0.35)
+    cfg = DensityConfig(length_scale_factor=0.25)
     m_pos = DensityReward(cfg).fit(z[pos], g[pos], list(fm.names))
     m_all = DensityReward(cfg).fit(z, g, list(fm.names))
     scen = get_scenario("static")

@@ -1,0 +1,352 @@
+"""The lookahead teacher (SPEC 4): reaches goals, never picks a predicted collision, stops when
+boxed in, smooths its command, reports its per-term scores, and its ablations run."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from pioneer.control.policy import build_policy, policy_names
+from pioneer.control.rollout import rollout
+from pioneer.control.teacher import (
+    LookaheadTeacher,
+    TeacherConfig,
+    default_reward,
+    make_teacher,
+)
+from pioneer.errors import ConfigError
+from pioneer.eval.episode import run_episode
+from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
+from pioneer.sim.env import NavEnv
+from pioneer.sim.humans import ARRIVED
+from pioneer.sim.scenarios import HumanSpec, Region, ScenarioConfig, get_scenario
+from pioneer.sim.world import SimConfig
+from pioneer_testutils import make_state, open_world, room_world
+
+ABLATIONS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
+
+
+def _room(humans: tuple[HumanSpec, ...] = ()) -> ScenarioConfig:
+    """A closed 4 × 6 m room; start near the bottom wall, goal near the top wall."""
+    return ScenarioConfig(
+        name="room",
+        walls=((-2, -3, 2, -3), (2, -3, 2, 3), (2, 3, -2, 3), (-2, 3, -2, -3)),
+        bounds=(-2.0, 2.0, -3.0, 3.0),
+        robot_start=Region(x=(-0.3, 0.3), y=(-2.4, -2.2)),
+        robot_goal=Region(x=(-0.4, 0.4), y=(2.0, 2.3)),
+        robot_heading=(math.pi / 2 - 0.3, math.pi / 2 + 0.3),
+        humans=humans,
+    )
+
+
+def _corner_human() -> HumanSpec:
+    """A person standing still in the far corner, well away from the straight route."""
+    spot = Region(x=(1.3, 1.3), y=(2.3, 2.3))
+    return HumanSpec(
+        role="static", start=spot, goal=spot, radius=0.4, v_pref_choices=(0.0,), static=True
+    )
+
+
+def _rollout_of(teacher: LookaheadTeacher, world, state):
+    cfg = teacher.config
+    return rollout(world, state, teacher.candidates, cfg.horizon, cfg.dt, cfg.human_model)
+
+
+# --------------------------------------------------------------------------------------------
+# 1. reaches the goal in an empty room
+
+
+@pytest.mark.parametrize("humans", [(), (_corner_human(),)], ids=["empty", "corner-human"])
+@pytest.mark.parametrize(
+    ("density", "seed"),
+    [(False, 0), (False, 7), (True, 0)],
+    ids=["no-density-0", "no-density-7", "density-0"],
+)
+def test_teacher_drives_to_the_goal_in_a_room(humans, density, seed):
+    cfg = _room(humans)
+    teacher = make_teacher("static") if density else LookaheadTeacher(None)
+    assert (teacher.density is not None) is density
+    rec, _ = run_episode(cfg, teacher, seed)
+    assert rec.event == "success"
+    assert rec.scenario == "room"
+    assert rec.time_s < cfg.sim.time_limit
+    # an efficient route: not much longer than the straight line from start to goal
+    env = NavEnv(cfg)
+    _, info = env.reset(seed=seed)
+    straight = float(np.linalg.norm(info["goal"] - info["robot_pose"][:2]))
+    assert straight - cfg.sim.goal_tolerance <= rec.path_length_m <= 1.25 * straight
+    if humans:
+        assert rec.min_clearance_m > 0.5
+    else:
+        assert math.isinf(rec.min_clearance_m)
+
+
+# --------------------------------------------------------------------------------------------
+# 2. feasibility: never a predicted collision; stop when boxed in; safety margin
+
+
+def _unsafe_states():
+    r = room_world(3.0, 3.0)
+    return {
+        # a person standing 0.1 m (clearance) ahead: almost every candidate runs into them
+        "human-ahead": (
+            r,
+            make_state((0.0, 0.0, 0.0), goal=(2.5, 0.0), humans=[{"pos": (1.0, 0.0)}]),
+        ),
+        # a person walking straight at the robot
+        "human-approaching": (
+            r,
+            make_state(
+                (0.0, 0.0, 0.0),
+                goal=(2.5, 0.0),
+                humans=[{"pos": (1.8, 0.0), "goal": (-2.5, 0.0), "vel": (-0.4, 0.0)}],
+            ),
+        ),
+        # a wall 0.2 m (clearance) ahead, goal just in front of it
+        "wall-ahead": (r, make_state((2.5, 0.0, 0.0), goal=(2.6, 0.5))),
+        # a corner: walls ahead and to the left
+        "corner": (r, make_state((2.45, 2.45, math.pi / 4), goal=(0.0, 0.0))),
+    }
+
+
+@pytest.mark.parametrize("name", list(_unsafe_states()))
+@pytest.mark.parametrize("human_model", ["privileged", "constant_velocity"])
+def test_teacher_never_selects_a_candidate_predicted_to_collide(name, human_model):
+    world, state = _unsafe_states()[name]
+    teacher = LookaheadTeacher(None, config=TeacherConfig(human_model=human_model))
+    d = teacher.decide(world, state)
+    ro = _rollout_of(teacher, world, state)
+    assert ro.collided.sum() >= 30, "the test state should make many candidates collide"
+    assert d.n_feasible == int((~ro.collided).sum()) > 0
+    assert 0 <= d.index < 120
+    assert not ro.collided[d.index]
+    np.testing.assert_array_equal(d.best, teacher.candidates[d.index])
+
+
+def test_the_feasibility_mask_overrides_the_best_score():
+    """In the human-ahead state the unmasked best score belongs to a colliding candidate."""
+    world, state = _unsafe_states()["human-ahead"]
+    teacher = LookaheadTeacher(None)
+    d = teacher.decide(world, state)
+    ro = _rollout_of(teacher, world, state)
+    d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
+    d_goal = ro.final_goal_distance
+    total, _ = combine(
+        np.zeros(120),
+        goal_term(d_goal, d_total),
+        obstacle_term(ro.obs),
+        d_goal,
+        d_total,
+        RuleWeights(),
+    )
+    assert ro.collided[int(np.argmax(total))]
+    assert d.terms["total"] == pytest.approx(np.max(np.where(ro.collided, -np.inf, total)))
+    assert d.terms["total"] < np.max(total)
+
+
+def _boxed_states():
+    hs = [{"pos": p, "status": ARRIVED} for p in [(0.95, 0), (-0.95, 0), (0, 0.95), (0, -0.95)]]
+    return {
+        "walls": (room_world(0.36, 0.36), make_state((0.0, 0.0, 0.7), goal=(2.0, 0.0))),
+        "humans": (open_world(), make_state((0.0, 0.0, 1.0), goal=(3.0, 0.0), humans=hs)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_boxed_states()))
+def test_teacher_stops_at_once_when_every_candidate_collides(name):
+    world, state = _boxed_states()[name]
+    teacher = LookaheadTeacher(None)
+    assert _rollout_of(teacher, world, state).collided.all()
+    # even while moving fast, the stop is immediate (no smoothing toward the old command)
+    free_world, free_state = open_world(), make_state((0.0, 0.0, 0.0), goal=(5.0, 0.0))
+    moving = teacher.decide(free_world, free_state)
+    assert moving.command[0] > 0.0
+    d = teacher.decide(world, state)
+    np.testing.assert_array_equal(d.command, [0.0, 0.0])
+    np.testing.assert_array_equal(d.best, [0.0, 0.0])
+    assert d.index == -1
+    assert d.n_feasible == 0
+    # after a stop the smoothing restarts from zero
+    again = teacher.decide(free_world, free_state)
+    np.testing.assert_array_equal(again.command, 0.5 * again.best)
+
+
+@pytest.mark.parametrize("margin", [0.2, 0.3, 0.5])
+def test_safety_margin_bounds_the_predicted_clearance_of_the_choice(margin):
+    world = room_world(3.0, 3.0)
+    # the person stands just beside the straight route to the goal
+    state = make_state(
+        (0.0, 0.0, 0.0), goal=(2.5, 0.0), humans=[{"pos": (1.6, 0.45), "status": ARRIVED}]
+    )
+    plain = LookaheadTeacher(None)
+    d0 = plain.decide(world, state)
+    ro = _rollout_of(plain, world, state)
+    assert ro.min_clearance[d0.index] < margin, "without a margin the teacher cuts close"
+    safe = LookaheadTeacher(None, config=TeacherConfig(safety_margin=margin))
+    d = safe.decide(world, state)
+    assert d.index >= 0
+    assert ro.min_clearance[d.index] >= margin
+    assert not ro.collided[d.index]
+    expected = int((~ro.collided & (ro.min_clearance >= margin)).sum())
+    assert d.n_feasible == expected < d0.n_feasible
+
+
+# --------------------------------------------------------------------------------------------
+# 3. smoothing
+
+
+def _teacher_states(n: int, seed: int = 3):
+    """n consecutive states of an HR-RL episode driven by a plain go-ahead command."""
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=seed)
+    out = [(info["world"], info["state"])]
+    for _ in range(n - 1):
+        _, _, term, trunc, info = env.step([0.3, 0.05])
+        assert not (term or trunc)
+        out.append((info["world"], info["state"]))
+    return out
+
+
+def test_smoothing_is_half_best_plus_half_previous():
+    teacher = LookaheadTeacher(None)
+    prev = np.zeros(2)
+    changed = 0
+    for world, state in _teacher_states(8):
+        d = teacher.decide(world, state)
+        assert d.index >= 0
+        np.testing.assert_array_equal(d.command, 0.5 * d.best + 0.5 * prev)
+        changed += int(not np.array_equal(d.command, d.best))
+        prev = d.command
+    assert changed >= 1  # the smoothed command really lags behind u*
+
+
+def test_reset_forgets_the_previous_command():
+    teacher = LookaheadTeacher(None)
+    (world, state), *_ = _teacher_states(1)
+    first = teacher.decide(world, state)
+    np.testing.assert_array_equal(first.command, 0.5 * first.best)
+    teacher.decide(world, state)
+    teacher.reset({}, np.random.default_rng(0))
+    assert teacher.last is None
+    np.testing.assert_array_equal(teacher.decide(world, state).command, first.command)
+
+
+def test_smoothing_one_sends_the_best_candidate():
+    teacher = LookaheadTeacher(None, config=TeacherConfig(smoothing=1.0))
+    for world, state in _teacher_states(4):
+        d = teacher.decide(world, state)
+        np.testing.assert_array_equal(d.command, d.best)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.5, 1.5])
+def test_smoothing_outside_the_unit_interval_is_refused(bad):
+    with pytest.raises(ConfigError, match="smoothing"):
+        TeacherConfig(smoothing=bad)
+
+
+# --------------------------------------------------------------------------------------------
+# 4. per-term scores and ablations
+
+
+@pytest.fixture(scope="module")
+def hr_rl_reward():
+    return default_reward("hr-rl")
+
+
+def _decide_with(weights: RuleWeights, reward):
+    (world, state), *_ = _teacher_states(1, seed=5)
+    t = LookaheadTeacher(reward, config=TeacherConfig(weights=weights))
+    return t.decide(world, state)
+
+
+def test_terms_add_up_to_the_total(hr_rl_reward):
+    def bonus(ro, state, world):
+        return 0.01 * ro.commands[:, 0]
+
+    (world, state), *_ = _teacher_states(1, seed=5)
+    t = LookaheadTeacher(hr_rl_reward, extra_score=bonus)
+    d = t.decide(world, state)
+    assert set(d.terms) == {"density", "goal", "obstacle", "extra", "total"}
+    assert set(d.raw_terms) == {"density", "goal", "obstacle"}
+    parts = d.terms["density"] + d.terms["goal"] + d.terms["obstacle"] + d.terms["extra"]
+    assert d.terms["total"] == pytest.approx(parts, rel=1e-12, abs=1e-12)
+    assert d.terms["extra"] == pytest.approx(0.01 * d.best[0])
+    for k in ("density", "goal", "obstacle"):
+        assert d.terms[k] != 0.0
+        assert d.raw_terms[k] != 0.0
+    # the weighted goal/obstacle terms are the unweighted ones times their adaptive weights
+    ro = _rollout_of(t, world, state)
+    d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
+    r = min(1.0, ro.final_goal_distance[d.index] / d_total)
+    assert d.terms["goal"] == pytest.approx(2.0 * (1.0 - r) * d.raw_terms["goal"])
+    assert d.terms["obstacle"] == pytest.approx(d.raw_terms["obstacle"])
+    a_den = 1.0 + math.cos(math.pi * (1.0 - r))
+    assert d.terms["density"] == pytest.approx(a_den * d.raw_terms["density"])
+
+
+@pytest.mark.parametrize("off", ["density", "goal", "obstacle"])
+def test_switching_a_term_off_zeroes_it(off, hr_rl_reward):
+    d = _decide_with(RuleWeights(**{f"use_{off}": False}), hr_rl_reward)
+    assert d.terms[off] == 0.0
+    for k in {"density", "goal", "obstacle"} - {off}:
+        assert d.terms[k] != 0.0
+    parts = d.terms["density"] + d.terms["goal"] + d.terms["obstacle"] + d.terms["extra"]
+    assert d.terms["total"] == pytest.approx(parts, rel=1e-12, abs=1e-12)
+
+
+def test_weight_overrides_replace_the_adaptive_weights(hr_rl_reward):
+    w = RuleWeights(density_weight=0.5, goal_weight=3.0, obstacle_weight=2.0)
+    d = _decide_with(w, hr_rl_reward)
+    assert d.terms["density"] == pytest.approx(0.5 * d.raw_terms["density"])
+    assert d.terms["goal"] == pytest.approx(3.0 * d.raw_terms["goal"])
+    assert d.terms["obstacle"] == pytest.approx(2.0 * d.raw_terms["obstacle"])
+
+
+def test_make_teacher_ablation_switches():
+    full = make_teacher("hr-rl")
+    assert full.density is not None and full.features == "obs_action"
+    assert full.config.weights == RuleWeights()
+    no_den = make_teacher("hr-rl", density=False)
+    assert no_den.density is None and not no_den.config.weights.use_density
+    assert not make_teacher("hr-rl", goal=False).config.weights.use_goal
+    assert not make_teacher("hr-rl", obstacle=False).config.weights.use_obstacle
+    assert make_teacher("static").features == "xy"
+    assert make_teacher("hr-rl", human_model="constant_velocity").config.human_model == (
+        "constant_velocity"
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ABLATIONS)
+def test_registered_teachers_construct_and_run(name):
+    assert name in policy_names()
+    policy = build_policy(name, "hr-rl")
+    assert isinstance(policy, LookaheadTeacher)
+    assert policy.name == name
+    decisions = []
+    act = policy.act
+
+    def spy(obs, info):
+        cmd = act(obs, info)
+        decisions.append(policy.last)
+        return cmd
+
+    policy.act = spy
+    # a 10 s limit keeps the run short (an ablated teacher may dawdle until the time limit)
+    scenario = dataclasses.replace(get_scenario("hr-rl"), sim=SimConfig(time_limit=10.0))
+    rec, _ = run_episode(scenario, policy, seed=11)
+    assert rec.policy == name
+    assert rec.event in {"success", "collision", "timeout"}
+    assert len(decisions) == rec.steps > 0
+    feasible = [d for d in decisions if d.index >= 0]
+    assert feasible
+    off = name.removeprefix("teacher-no-") if name != "teacher" else None
+    for d in feasible:
+        for k in ("density", "goal", "obstacle"):
+            if k == off:
+                assert d.terms[k] == 0.0
+    if off is None:
+        assert any(d.terms["density"] != 0.0 for d in feasible)

@@ -1,0 +1,360 @@
+"""Episodes and the evaluation harness (SPEC 7): deterministic episodes and seeds, resumable
+records (after a kill or a torn write), loud failure on a corrupt file, and the same records
+from serial, parallel and Ray runs."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pioneer.control.policy import build_policy
+from pioneer.control.teacher import make_teacher
+from pioneer.errors import ConfigError, DataError
+from pioneer.eval.episode import run_episode
+from pioneer.eval.harness import (
+    EPISODES_FILE,
+    PolicySpec,
+    Task,
+    episode_seed,
+    evaluate,
+    read_records,
+    run_task,
+)
+from pioneer.sim.env import NavEnv
+
+TIMING = ("wall_time_s", "decision_ms")
+GOAL = PolicySpec.make("goal")  # in "static" it drives into the person: ~20 steps an episode
+
+
+def _key(r):
+    return (r["scenario"], r["policy"], int(r["seed"]), int(r["trial"]))
+
+
+def _untimed(records):
+    """Records without the timing fields, sorted by episode key."""
+    return sorted(({k: v for k, v in r.items() if k not in TIMING} for r in records), key=_key)
+
+
+def _lines(path: Path) -> list[str]:
+    return path.read_text().splitlines()
+
+
+def _expected_keys(scenarios, policies, seeds, trials):
+    return {
+        (sc, p, s, t)
+        for sc in scenarios
+        for p in policies
+        for s in range(seeds)
+        for t in range(trials)
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# episodes
+
+
+def test_same_seed_gives_the_same_episode_bit_for_bit():
+    sc, seed = "hr-rl", 3
+    rec_a, tr_a = run_episode(sc, make_teacher(sc), seed, record=True)
+    rec_b, tr_b = run_episode(sc, make_teacher(sc), seed, record=True)
+    assert tr_a is not None and tr_b is not None
+    assert rec_a == rec_b
+    assert rec_a.to_dict() == rec_b.to_dict()
+    assert len(tr_a.states) == len(tr_b.states) == rec_a.steps + 1
+    assert np.array_equal(tr_a.robot, tr_b.robot)
+    assert np.array_equal(tr_a.humans, tr_b.humans)
+    assert all(a == b for a, b in zip(tr_a.states, tr_b.states, strict=True))
+    assert not np.array_equal(tr_a.robot[0], tr_a.robot[-1])  # the robot did move
+    # while another seed starts from another state
+    _, info = NavEnv(sc).reset(seed=seed + 1)
+    assert not np.array_equal(info["state"].robot[0], tr_a.robot[0])
+
+
+def test_episode_record_fields():
+    rec, traj = run_episode("static", build_policy("goal"), 0)
+    assert traj is None
+    d = rec.to_dict()
+    assert d["scenario"] == "static" and d["policy"] == "goal" and d["seed"] == 0
+    assert d["event"] == "collision"
+    assert d["steps"] > 0
+    assert d["time_s"] == pytest.approx(0.1 * d["steps"])
+    assert d["min_clearance_m"] < 0.0  # a collision: negative swept clearance
+    assert 0.0 < d["time_close_s"] <= d["time_s"]
+    json.dumps(d)  # JSON-serialisable
+
+
+# --------------------------------------------------------------------------------------------
+# episode seeds
+
+
+def test_episode_seed_is_stable_and_distinct():
+    # fixed values: the seed depends on crc32 and SeedSequence only (no salted hash())
+    assert episode_seed("hr-rl", 0, 0) == 3059802104
+    assert episode_seed("static", 1, 2) == 171176969
+    assert episode_seed("hl-rr", 4, 99) == 2840022838
+    grid = [(sc, s, t) for sc in ("hr-rl", "hl-rr", "static") for s in range(5) for t in range(40)]
+    seeds = [episode_seed(*g) for g in grid]
+    assert seeds == [episode_seed(*g) for g in grid]
+    assert len(set(seeds)) == len(grid)
+    assert all(isinstance(x, int) and 0 <= x < 2**32 for x in seeds)
+
+
+def test_every_record_can_be_replayed_alone(tmp_path):
+    recs = evaluate(["static"], [GOAL], 2, 2, tmp_path, workers=1, progress=False)
+    for r in recs:
+        assert r["episode_seed"] == episode_seed(r["scenario"], r["seed"], r["trial"])
+        replay, _ = run_episode(r["scenario"], build_policy("goal"), r["episode_seed"])
+        assert {**replay.to_dict(), "seed": r["seed"]} == {k: r[k] for k in replay.to_dict()}
+    # every policy meets the same initial states: trials differ from each other
+    assert len({r["episode_seed"] for r in recs}) == 4
+
+
+# --------------------------------------------------------------------------------------------
+# records file and resume
+
+
+def test_evaluate_writes_one_record_per_episode(tmp_path):
+    seen = []
+    recs = evaluate(
+        ["static", "hr-rl"],
+        [GOAL],
+        2,
+        2,
+        tmp_path,
+        workers=1,
+        progress=False,
+        on_record=seen.append,
+    )
+    path = tmp_path / EPISODES_FILE
+    assert len(recs) == len(seen) == 8
+    assert {_key(r) for r in recs} == _expected_keys(["static", "hr-rl"], ["goal"], 2, 2)
+    lines = _lines(path)
+    assert len(lines) == 8
+    assert [json.loads(x) for x in lines] == seen
+    assert read_records(path) == recs
+    for r in recs:
+        assert r["event"] in {"success", "collision", "timeout"}
+        assert r["wall_time_s"] > 0 and r["decision_ms"] > 0
+
+
+def test_resume_runs_only_the_new_episodes(tmp_path):
+    first = []
+    evaluate(["static"], [GOAL], 2, 2, tmp_path, workers=1, progress=False, on_record=first.append)
+    assert len(first) == 4
+    before = _lines(tmp_path / EPISODES_FILE)
+    second = []
+    recs = evaluate(
+        ["static"], [GOAL], 2, 4, tmp_path, workers=1, progress=False, on_record=second.append
+    )
+    assert len(second) == 4
+    assert {(r["seed"], r["trial"]) for r in second} == {(s, t) for s in range(2) for t in (2, 3)}
+    lines = _lines(tmp_path / EPISODES_FILE)
+    assert lines[:4] == before  # old records untouched
+    keys = [_key(json.loads(x)) for x in lines]
+    assert len(keys) == len(set(keys)) == 8
+    assert set(keys) == _expected_keys(["static"], ["goal"], 2, 4)
+    assert len(recs) == 8
+    # nothing left to do: nothing runs
+    third = []
+    evaluate(["static"], [GOAL], 2, 4, tmp_path, workers=1, progress=False, on_record=third.append)
+    assert third == []
+    assert len(_lines(tmp_path / EPISODES_FILE)) == 8
+
+
+@pytest.mark.slow
+def test_a_killed_run_resumes_with_one_record_per_episode(tmp_path):
+    out = tmp_path / "eval"
+    path = out / EPISODES_FILE
+    seeds, trials = 2, 100  # 200 episodes of ~20 steps: long enough to be killed mid-run
+    cmd = [
+        sys.executable, "-m", "pioneer.cli", "eval", "--scenario", "static", "--policy", "goal",
+        "--seeds", str(seeds), "--trials", str(trials), "--out", str(out), "--workers", "1",
+    ]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 300  # a guard against a hang, not a timing assertion
+        while time.monotonic() < deadline and proc.poll() is None:
+            if path.exists() and path.read_bytes().count(b"\n") >= 1:
+                break
+            time.sleep(0.002)
+        proc.kill()  # SIGKILL: no cleanup, no flush
+    finally:
+        proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, "the run should have been killed mid-way"
+    written = path.read_bytes().split(b"\n")
+    n_before = len(written) - 1  # complete lines
+    assert 1 <= n_before < seeds * trials
+    print(f"killed after {n_before} of {seeds * trials} records")
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    assert res.returncode == 0, res.stderr
+    assert "static/goal: SR 0.0%" in res.stdout
+    assert f"({seeds * trials} episodes)" in res.stdout
+    lines = _lines(path)
+    assert len(lines) == seeds * trials
+    assert [x.encode() for x in lines[:n_before]] == written[:n_before]
+    keys = [_key(json.loads(x)) for x in lines]
+    assert len(set(keys)) == len(keys)
+    assert set(keys) == _expected_keys(["static"], ["goal"], seeds, trials)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["static/goal"]["episodes"] == seeds * trials
+
+
+def test_a_torn_last_line_is_dropped_with_a_warning_and_rerun(tmp_path, capsys):
+    evaluate(["static"], [GOAL], 1, 3, tmp_path, workers=1, progress=False)
+    path = tmp_path / EPISODES_FILE
+    lines = _lines(path)
+    lost = json.loads(lines[-1])
+    # a crash in the middle of writing the last record: half a line, no newline
+    path.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][: len(lines[-1]) // 2])
+    capsys.readouterr()
+    rerun = []
+    recs = evaluate(
+        ["static"], [GOAL], 1, 3, tmp_path, workers=1, progress=False, on_record=rerun.append
+    )
+    err = capsys.readouterr().err
+    assert "unfinished last line" in err
+    assert str(path) in err
+    assert len(rerun) == 1
+    assert _key(rerun[0]) == _key(lost)
+    assert _untimed(rerun) == _untimed([lost])  # the same episode, run again
+    new_lines = _lines(path)
+    assert new_lines[:2] == lines[:2]
+    keys = [_key(json.loads(x)) for x in new_lines]
+    assert len(keys) == len(set(keys)) == 3
+    assert len(recs) == 3
+
+
+def test_read_records_drops_a_torn_line_and_keeps_the_file_line_aligned(tmp_path, capsys):
+    path = tmp_path / EPISODES_FILE
+    good = {"scenario": "static", "policy": "goal", "seed": 0, "trial": 0, "event": "collision"}
+    path.write_text(json.dumps(good) + "\n" + '{"scenario": "sta')
+    assert read_records(path) == [good]
+    assert "unfinished last line" in capsys.readouterr().err
+    assert path.read_text() == json.dumps(good) + "\n"
+    # a file holding only a torn line becomes empty
+    path.write_text('{"scen')
+    assert read_records(path) == []
+    assert path.read_text() == ""
+    assert read_records(tmp_path / "missing.jsonl") == []
+
+
+@pytest.mark.parametrize(
+    ("bad", "needle"),
+    [("{not json}", "one JSON record"), ('{"scenario": "static"}', "fields")],
+    ids=["not-json", "missing-fields"],
+)
+def test_a_malformed_line_in_the_middle_is_a_data_error_naming_it(tmp_path, bad, needle):
+    evaluate(["static"], [GOAL], 1, 3, tmp_path, workers=1, progress=False)
+    path = tmp_path / EPISODES_FILE
+    lines = _lines(path)
+    corrupt = "\n".join([lines[0], bad, *lines[1:]]) + "\n"
+    path.write_text(corrupt)
+    with pytest.raises(DataError, match=r"line 2\b") as exc:
+        read_records(path)
+    assert needle in str(exc.value)
+    assert "expected" in str(exc.value) and "fix" in str(exc.value)
+    ran = []
+    with pytest.raises(DataError, match=r"line 2\b"):
+        evaluate(
+            ["static"], [GOAL], 1, 4, tmp_path, workers=1, progress=False, on_record=ran.append
+        )
+    assert ran == []  # nothing runs on top of a corrupt file ...
+    assert path.read_text() == corrupt  # ... and nothing in it is lost
+
+
+@pytest.mark.parametrize("bad", ["[1, 2]", '"text"'])
+def test_a_json_line_that_is_not_a_record_is_a_data_error(tmp_path, bad):
+    path = tmp_path / EPISODES_FILE
+    good = {"scenario": "static", "policy": "goal", "seed": 0, "trial": 0, "event": "collision"}
+    path.write_text(f"{json.dumps(good)}\n{bad}\n")
+    with pytest.raises(DataError, match=r"line 2\b"):
+        read_records(path)
+
+
+@pytest.mark.parametrize("bad", ["null", "42"])
+def test_a_json_scalar_line_is_a_data_error(tmp_path, bad):
+    path = tmp_path / EPISODES_FILE
+    good = {"scenario": "static", "policy": "goal", "seed": 0, "trial": 0, "event": "collision"}
+    path.write_text(f"{json.dumps(good)}\n{bad}\n")
+    with pytest.raises(DataError, match=r"line 2\b"):
+        read_records(path)
+
+
+def test_bad_counts_and_backend_are_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match="seeds/trials"):
+        evaluate(["static"], [GOAL], 0, 3, tmp_path / "a", progress=False)
+    with pytest.raises(ConfigError, match="seeds/trials"):
+        evaluate(["static"], [GOAL], 2, 0, tmp_path / "a", progress=False)
+    with pytest.raises(ConfigError, match="backend"):
+        evaluate(["static"], [GOAL], 1, 1, tmp_path / "b", backend="dask", progress=False)
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_run_task_labels_the_record_with_the_policy_row():
+    spec = PolicySpec.make("teacher", label="teacher-no-density", density=False)
+    assert spec.row == "teacher-no-density"
+    assert spec.kwargs == (("density", False),)
+    rec = run_task(Task("static", spec, 3, 1))
+    assert rec["policy"] == "teacher-no-density"
+    assert (rec["scenario"], rec["seed"], rec["trial"]) == ("static", 3, 1)
+    assert rec["episode_seed"] == episode_seed("static", 3, 1)
+    assert rec["decision_ms"] == pytest.approx(1000.0 * rec["wall_time_s"] / rec["steps"])
+
+
+# --------------------------------------------------------------------------------------------
+# backends
+
+
+PARALLEL_POLICIES = [GOAL, PolicySpec.make("teacher", label="teacher-no-density", density=False)]
+
+
+@pytest.mark.slow
+def test_parallel_and_serial_runs_give_the_same_records(tmp_path):
+    serial = evaluate(
+        ["static"], PARALLEL_POLICIES, 2, 2, tmp_path / "serial", workers=1, progress=False
+    )
+    parallel = evaluate(
+        ["static"], PARALLEL_POLICIES, 2, 2, tmp_path / "parallel", workers=2, progress=False
+    )
+    assert len(serial) == len(parallel) == 8
+    assert {_key(r) for r in parallel} == _expected_keys(
+        ["static"], ["goal", "teacher-no-density"], 2, 2
+    )
+    assert _untimed(parallel) == _untimed(serial)
+    assert any(r["event"] == "success" for r in serial)  # the teacher episodes do something
+    on_disk = read_records(tmp_path / "parallel" / EPISODES_FILE)
+    assert _untimed(on_disk) == _untimed(serial)
+
+
+@pytest.mark.slow
+def test_ray_backend_gives_the_same_records(tmp_path):
+    ray = pytest.importorskip("ray")
+    process = evaluate(["static"], [GOAL], 2, 2, tmp_path / "process", workers=1, progress=False)
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        seen = []
+        recs = evaluate(
+            ["static"],
+            [GOAL],
+            2,
+            2,
+            tmp_path / "ray",
+            backend="ray",
+            progress=False,
+            on_record=seen.append,
+        )
+    finally:
+        if started:
+            ray.shutdown()
+    assert len(seen) == len(recs) == 4
+    assert _untimed(recs) == _untimed(process)
+    assert _untimed(read_records(tmp_path / "ray" / EPISODES_FILE)) == _untimed(process)

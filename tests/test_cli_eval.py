@@ -1,0 +1,161 @@
+"""``pioneer run`` with the teacher and ``pioneer eval``: records, labels, resume, one-line
+errors with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from pioneer.cli import main
+from pioneer.control.teacher import make_teacher
+from pioneer.eval.episode import run_episode
+from pioneer.eval.harness import EPISODES_FILE
+
+
+def _one_error_line(err: str) -> str:
+    lines = err.strip("\n").splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("pioneer: error:")
+    return lines[0]
+
+
+def _eval_argv(out, *extra):
+    return ["eval", "--scenario", "static", "--out", str(out), "--workers", "1", *extra]
+
+
+# --------------------------------------------------------------------------------------------
+# pioneer run
+
+
+def test_run_teacher_prints_a_json_record(capsys):
+    assert main(["run", "--scenario", "hr-rl", "--policy", "teacher", "--seed", "0"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1
+    rec = json.loads(out[0])
+    assert (rec["scenario"], rec["policy"], rec["seed"]) == ("hr-rl", "teacher", 0)
+    assert rec["event"] in {"success", "collision", "timeout"}
+    assert rec["steps"] > 0
+    assert rec["time_s"] == pytest.approx(0.1 * rec["steps"])
+
+
+def test_run_no_density_names_the_ablation_and_matches_a_direct_run(capsys):
+    argv = ["run", "--scenario", "hr-rl", "--policy", "teacher", "--seed", "2", "--no-density"]
+    assert main(argv) == 0
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rec["policy"] == "teacher-no-density"
+    direct, _ = run_episode("hr-rl", make_teacher("hr-rl", density=False), 2)
+    assert rec == {**direct.to_dict(), "policy": "teacher-no-density"}
+
+
+def test_run_unknown_policy_exits_2_with_one_line():
+    proc = subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", "run", "--policy", "nope"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 2
+    line = _one_error_line(proc.stderr)
+    assert "policy" in line and "nope" in line and "teacher" in line  # lists the choices
+    assert proc.stdout == ""
+
+
+def test_run_ablation_flag_with_a_non_teacher_policy_is_a_one_line_error(capsys):
+    try:
+        code = main(["run", "--scenario", "static", "--policy", "goal", "--no-density"])
+    except TypeError:
+        code = 1
+    assert code == 2
+    assert "density" in _one_error_line(capsys.readouterr().err)
+
+
+# --------------------------------------------------------------------------------------------
+# pioneer eval
+
+
+def test_eval_writes_records_and_summary_then_resumes(tmp_path, capsys):
+    out = tmp_path / "ev"
+    assert main(_eval_argv(out, "--policy", "goal", "--seeds", "2", "--trials", "2")) == 0
+    stdout = capsys.readouterr().out
+    assert "static/goal: SR 0.0%" in stdout
+    assert "(4 episodes)" in stdout
+    lines = (out / EPISODES_FILE).read_text().splitlines()
+    assert len(lines) == 4
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["static/goal"]
+    assert summary["static/goal"]["collision_rate"]["mean"] == 100.0
+    assert summary["static/goal"]["seeds"] == 2
+    # the same command again: nothing new runs, nothing is duplicated
+    assert main(_eval_argv(out, "--policy", "goal", "--seeds", "2", "--trials", "2")) == 0
+    assert "(4 episodes)" in capsys.readouterr().out
+    assert (out / EPISODES_FILE).read_text().splitlines() == lines
+
+
+def test_eval_no_density_labels_only_the_teacher(tmp_path, capsys):
+    out = tmp_path / "ev"
+    argv = _eval_argv(out, "--policy", "teacher", "goal", "--no-density")
+    assert main([*argv, "--seeds", "1", "--trials", "1"]) == 0
+    recs = [json.loads(x) for x in (out / EPISODES_FILE).read_text().splitlines()]
+    assert sorted(r["policy"] for r in recs) == ["goal", "teacher-no-density"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary) == {"static/goal", "static/teacher-no-density"}
+    stdout = capsys.readouterr().out
+    assert "static/teacher-no-density: SR" in stdout
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--seeds", "0"), ("--trials", "0"), ("--seeds", "-1")]
+)
+def test_eval_bad_counts_exit_2_with_one_line(tmp_path, capsys, flag, value):
+    out = tmp_path / "ev"
+    argv = _eval_argv(out, "--policy", "goal", "--seeds", "1", "--trials", "1")
+    argv[argv.index(flag) + 1] = value
+    assert main(argv) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "seeds/trials" in line and "expected" in line and "fix" in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("scenarios", "policies"), [(["static"], ["goal", "nope"]), (["static", "nope"], ["goal"])]
+)
+def test_eval_unknown_name_exits_2(tmp_path, capsys, scenarios, policies):
+    out = tmp_path / "ev"
+    argv = ["eval", "--scenario", *scenarios, "--policy", *policies, "--out", str(out)]
+    assert main([*argv, "--seeds", "1", "--trials", "1", "--workers", "1"]) == 2
+    last = capsys.readouterr().err.strip("\n").splitlines()[-1]
+    assert last.startswith("pioneer: error:")
+    assert "nope" in last and "expected one of" in last
+
+
+@pytest.mark.parametrize(
+    ("scenarios", "policies"), [(["static"], ["goal", "nope"]), (["static", "nope"], ["goal"])]
+)
+def test_eval_checks_names_before_running_anything(tmp_path, capsys, scenarios, policies):
+    out = tmp_path / "ev"
+    argv = ["eval", "--scenario", *scenarios, "--policy", *policies, "--out", str(out)]
+    assert main([*argv, "--seeds", "1", "--trials", "3", "--workers", "1"]) == 2
+    assert "nope" in _one_error_line(capsys.readouterr().err)
+    records = out / EPISODES_FILE
+    assert not records.exists() or records.read_text() == ""
+
+
+def test_eval_on_a_corrupt_records_file_exits_2_naming_the_line(tmp_path, capsys):
+    out = tmp_path / "ev"
+    assert main(_eval_argv(out, "--policy", "goal", "--seeds", "1", "--trials", "2")) == 0
+    path = out / EPISODES_FILE
+    first, second = path.read_text().splitlines()
+    corrupt = f"{first}\n{{not json}}\n{second}\n"
+    path.write_text(corrupt)
+    capsys.readouterr()
+    assert main(_eval_argv(out, "--policy", "goal", "--seeds", "1", "--trials", "3")) == 2
+    captured = capsys.readouterr()
+    line = _one_error_line(captured.err)
+    assert "line 2" in line and EPISODES_FILE in line
+    assert "{not json}" in line
+    assert captured.out == ""
+    assert path.read_text() == corrupt
