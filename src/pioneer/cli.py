@@ -214,10 +214,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
     )
     summary = summarize(recs)
-    from pioneer.io import atomic_path
+    from pioneer.eval.report import write_summary
 
-    with atomic_path(Path(args.out) / "summary.json") as tmp:
-        tmp.write_text(json.dumps(summary, indent=2))
+    write_summary(args.out, summary)
     for key, s in summary.items():
         print(
             f"{key}: SR {s['success_rate']['mean']:.1f}%  TT {s['time_mean_s']['mean']:.2f} s  "

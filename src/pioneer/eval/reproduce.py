@@ -3,7 +3,7 @@
 Steps (each output is written atomically; the evaluation resumes if interrupted):
 1. fit the density reward of each elevator scenario on its shipped demos → ``models/``;
 2. evaluate the teacher and its three ablations (paper Tables I–II) on HR-RL and HL-RR;
-3. write ``summary.json``, ``tables.md`` and ``tables.csv`` (our rows beside the paper's);
+3. write ``summary.json``, ``summary.md`` and ``summary.csv`` (our rows beside the paper's);
 4. the static-study figure (paper Fig. 3), a trajectory plot and a GIF per scenario;
 5. ``index.md``, a report that links everything.
 """
@@ -20,7 +20,7 @@ from typing import Any
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
-from pioneer.eval.tables import csv_table, markdown_table, table_rows
+from pioneer.eval.report import write_summary
 from pioneer.io import atomic_path
 
 __all__ = ["PROFILES", "Profile", "reproduce"]
@@ -81,16 +81,19 @@ def reproduce(
         SCENARIOS, policies, prof.seeds, prof.trials, out / "eval", workers, progress=progress
     )
     summary = summarize(records)
-    _write(out / "summary.json", json.dumps(summary, indent=2))
-    rows_1 = table_rows("I", summary, SCENARIOS, ["teacher", *[p.row for p in extra_policies]])
-    rows_2 = table_rows("II", summary, SCENARIOS, list(TEACHERS))
-    md = (
-        markdown_table(rows_1, "Table I — navigation performance (ours: mean ± 95% CI over seeds)")
-        + "\n"
-        + markdown_table(rows_2, "Table II — ablation of the reward terms")
+    md = write_summary(
+        out,
+        summary,
+        [
+            (
+                "I",
+                "Table I — navigation performance (ours: mean ± 95% CI over seeds)",
+                SCENARIOS,
+                ["teacher", *[p.row for p in extra_policies]],
+            ),
+            ("II", "Table II — ablation of the reward terms", SCENARIOS, list(TEACHERS)),
+        ],
     )
-    _write(out / "tables.md", md)
-    _write(out / "tables.csv", csv_table(rows_1, "I") + csv_table(rows_2, "II").split("\n", 1)[1])
     figures = _figures(out, reward_tpl)
     elapsed = time.perf_counter() - t0
     _write(out / "index.md", _index(profile, prof, md, figures, elapsed, len(records)))
@@ -152,7 +155,7 @@ def _index(
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
         "95% confidence intervals: [summary.json](summary.json); tables as CSV: "
-        "[tables.csv](tables.csv).",
+        "[summary.csv](summary.csv).",
         "",
         tables,
         "## Figures",
