@@ -5,10 +5,17 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_path"]
+import numpy as np
+
+from pioneer.errors import DataError, expect
+
+__all__ = ["atomic_path", "load_npz"]
 
 # Read once at import (reading the umask means setting it; not thread-safe later on).
 _UMASK = os.umask(0)
@@ -34,3 +41,18 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def load_npz(path: str | os.PathLike[str], what: str, fix: str) -> dict[str, Any]:
+    """All arrays of an ``.npz`` (``allow_pickle=False``); a missing, truncated or corrupt file
+    raises one :class:`DataError` naming ``what`` and the ``fix``."""
+    p = Path(path)
+    if not p.is_file():
+        raise DataError(expect(what, "an existing .npz file", str(p), "check the path"))
+    try:
+        with np.load(p, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
+        raise DataError(
+            expect(f"{what} {p}", "a readable .npz", f"unreadable ({exc})", fix)
+        ) from exc

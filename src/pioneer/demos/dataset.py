@@ -13,9 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import zipfile
-import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
-from pioneer.io import atomic_path
+from pioneer.io import atomic_path, load_npz
 from pioneer.sim.lidar import observation_names
 
 __all__ = ["FORMAT", "Dataset", "FeatureMap", "feature_map"]
@@ -94,6 +92,28 @@ class Dataset:
     def columns() -> dict[str, list[Any]]:
         """Empty column lists to append rows to, then pass to :meth:`from_rows`."""
         return {k: [] for k in _FIELDS}
+
+    @staticmethod
+    def add_frames(
+        cols: dict[str, list[Any]],
+        frames: Sequence[Mapping[str, Any]],
+        gamma: float | Sequence[float],
+        episode: int,
+        seed: int,
+        scenario: int = 0,
+    ) -> None:
+        """Append recorded frames (dicts with step, time, obs, action, pose) to ``cols``."""
+        gammas = [gamma] * len(frames) if isinstance(gamma, int | float) else list(gamma)
+        for f, g in zip(frames, gammas, strict=True):
+            cols["episode"].append(episode)
+            cols["step"].append(f["step"])
+            cols["time"].append(f["time"])
+            cols["obs"].append(f["obs"])
+            cols["action"].append(f["action"])
+            cols["gamma"].append(g)
+            cols["pose"].append(f["pose"])
+            cols["scenario"].append(scenario)
+            cols["seed"].append(seed)
 
     def _arrays(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in _FIELDS}
@@ -171,20 +191,7 @@ class Dataset:
     def load(cls, path: str | Path) -> Dataset:
         """Read and validate a dataset file; errors name the field and row."""
         p = Path(path)
-        if not p.is_file():
-            raise DataError(expect("dataset", "an existing .npz file", str(p), "check the path"))
-        try:
-            with np.load(p, allow_pickle=False) as f:
-                arrays = {k: f[k] for k in f.files}
-        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
-            raise DataError(
-                expect(
-                    f"dataset {p}",
-                    "a readable .npz",
-                    f"unreadable ({exc})",
-                    "regenerate it; the file is truncated or not a dataset",
-                )
-            ) from exc
+        arrays = load_npz(p, "dataset", "regenerate it; the file is truncated or not a dataset")
         if "metadata" not in arrays:
             raise DataError(expect(f"{p}", "a 'metadata' entry", sorted(arrays), "regenerate"))
         try:

@@ -91,16 +91,7 @@ def generate(
         nonlocal episode
         # Truncating: positives keep their first frames, negatives the ones nearest the collision.
         frames = frames[:limit] if gamma > 0 else frames[-limit:]
-        for f in frames:
-            cols["episode"].append(episode)
-            cols["step"].append(f["step"])
-            cols["time"].append(f["time"])
-            cols["obs"].append(f["obs"])
-            cols["action"].append(f["action"])
-            cols["gamma"].append(gamma)
-            cols["pose"].append(f["pose"])
-            cols["scenario"].append(0)
-            cols["seed"].append(ep_seed)
+        Dataset.add_frames(cols, frames, gamma, episode, ep_seed)
         episode += 1
         return len(frames)
 

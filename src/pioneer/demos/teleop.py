@@ -287,16 +287,7 @@ class TeleopSession:
 
     def _append(self, ep: _Episode, gamma: NDArray[np.float64], event: str) -> None:
         cols = Dataset.columns()
-        for f, g in zip(ep.frames, gamma, strict=True):
-            cols["episode"].append(0)
-            cols["step"].append(f["step"])
-            cols["time"].append(f["time"])
-            cols["obs"].append(f["obs"])
-            cols["action"].append(f["action"])
-            cols["gamma"].append(g)
-            cols["pose"].append(f["pose"])
-            cols["scenario"].append(0)
-            cols["seed"].append(ep.seed)
+        Dataset.add_frames(cols, ep.frames, gamma.tolist(), 0, ep.seed)
         new = Dataset.from_rows(cols, scenarios=[self.cfg.name])
         old = Dataset.load(self.out) if self.out.exists() else None
         merged = new if old is None else Dataset.merge([old, new])

@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import zipfile
-import zlib
 from pathlib import Path
 from typing import Any, Self
 
@@ -32,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import atomic_path
+from pioneer.io import atomic_path, load_npz
 from pioneer.reward.kernels import leverage_factor, sq_dists
 
 __all__ = ["DensityConfig", "DensityReward", "farthest_point_indices", "kmeans_medoid_indices"]
@@ -307,22 +305,9 @@ class DensityReward:
     def load(cls, path: str | Path) -> DensityReward:
         """Read a model written by :meth:`save`; every field is validated."""
         p = Path(path)
-        if not p.is_file():
-            raise DataError(
-                expect("reward model", "an existing .npz file", str(p), "check the path")
-            )
-        try:
-            with np.load(p, allow_pickle=False) as f:
-                arrays = {k: f[k] for k in f.files}
-        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
-            raise DataError(
-                expect(
-                    f"reward model {p}",
-                    "a readable .npz",
-                    f"unreadable ({exc})",
-                    "re-fit the model; the file is truncated or not an npz",
-                )
-            ) from exc
+        arrays = load_npz(
+            p, "reward model", "re-fit the model; the file is truncated or not an npz"
+        )
         need = {"mean", "std", "inducing", "leverage", "alpha", "metadata"}
         if need - set(arrays):
             raise DataError(
