@@ -91,6 +91,7 @@ class Plan:
     memory_repeats: int = 3
     fit_repeats: int = 7
     fit_large_repeats: int = 3
+    cvar_episodes: int = 4
 
 
 FULL = Plan()
@@ -103,6 +104,7 @@ QUICK = Plan(
     memory_repeats=1,
     fit_repeats=3,
     fit_large_repeats=1,
+    cvar_episodes=1,
 )
 
 
@@ -800,6 +802,35 @@ def bench_teacher_decision(plan: Plan) -> dict[str, Any]:
     }
 
 
+def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
+    """CVaR-BF decision time over the states of seeded HR-RL episodes (as the original paper
+    reports its solver time), next to the teacher's."""
+    from pioneer.control.policy import build_policy
+    from pioneer.sim.env import NavEnv
+
+    env = NavEnv("hr-rl")
+    times: list[float] = []
+    for ep in range(plan.cvar_episodes):
+        policy = build_policy("cvar-bf", "hr-rl")
+        obs, info = env.reset(seed=SEED + 40 + ep)
+        policy.reset(info, np.random.default_rng(SEED + 40 + ep))
+        done = False
+        while not done:
+            t0 = time.perf_counter()
+            u = policy.act(obs, info)
+            times.append(time.perf_counter() - t0)
+            obs, _, term, trunc, info = env.step(u)
+            done = term or trunc
+    secs = np.asarray(times)
+    return {
+        "metrics": {
+            "ms_decision": metric(secs * 1e3, "ms", ("<=", 20.0)),
+            "ms_decision_p90": metric([float(np.percentile(secs, 90) * 1e3)], "ms"),
+        },
+        "info": {"decisions": int(secs.size), "episodes": plan.cvar_episodes},
+    }
+
+
 BENCHMARKS = (
     "env_step",
     "pysocialforce_step",
@@ -808,6 +839,7 @@ BENCHMARKS = (
     "density_fit",
     "density_eval",
     "teacher_decision",
+    "cvar_bf_decision",
     "memory",
 )
 
@@ -871,6 +903,8 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
                 res = bench_density_eval(plan)
             elif name == "teacher_decision":
                 res = bench_teacher_decision(plan)
+            elif name == "cvar_bf_decision":
+                res = bench_cvar_bf_decision(plan)
             else:
                 res = bench_memory(plan)
         except Exception as exc:
