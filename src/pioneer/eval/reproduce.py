@@ -2,7 +2,8 @@
 
 Steps (each output is written atomically; the evaluation resumes if interrupted):
 1. fit the density reward of each elevator scenario on its shipped demos → ``models/``;
-2. evaluate the teacher and its three ablations (paper Tables I–II) on HR-RL and HL-RR;
+2. evaluate the teacher, its three ablations and the baselines (paper Tables I–II) on HR-RL
+   and HL-RR;
 3. write ``summary.json``, ``summary.md`` and ``summary.csv`` (our rows beside the paper's);
 4. the static-study figure (paper Fig. 3), a trajectory plot and a GIF per scenario;
 5. ``index.md``, a report that links everything.
@@ -37,6 +38,7 @@ class Profile:
 PROFILES = {"quick": Profile(seeds=2, trials=10), "paper": Profile(seeds=5, trials=100)}
 SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
+BASELINES = ("cvar-bf",)  # paper Table I; CrowdNav++ joins when it is trained
 
 
 def _write(path: Path, text: str) -> None:
@@ -76,7 +78,8 @@ def reproduce(
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
     policies = [PolicySpec.make(name, reward=reward_tpl) for name in TEACHERS]
-    policies += list(extra_policies)
+    extra = [PolicySpec.make(name) for name in BASELINES] + list(extra_policies)
+    policies += extra
     records = evaluate(
         SCENARIOS, policies, prof.seeds, prof.trials, out / "eval", workers, progress=progress
     )
@@ -89,7 +92,7 @@ def reproduce(
                 "I",
                 "Table I — navigation performance (ours: mean ± 95% CI over seeds)",
                 SCENARIOS,
-                ["teacher", *[p.row for p in extra_policies]],
+                ["teacher", *[p.row for p in extra]],
             ),
             ("II", "Table II — ablation of the reward terms", SCENARIOS, list(TEACHERS)),
         ],
