@@ -55,6 +55,16 @@ def policy_names() -> list[str]:
 
 def policy_factory(name: str) -> Callable[..., Policy]:
     """The factory registered under ``name``."""
+    if name.startswith("student") and name not in _FACTORIES:
+        # The students live in pioneer.learn (torch); register them on first use only.
+        try:
+            import pioneer.learn  # noqa: F401
+        except ImportError as exc:
+            raise ConfigError(
+                expect(
+                    "policy", f"{name} (needs torch)", str(exc), "pip install 'pioneer-nav[learn]'"
+                )
+            ) from exc
     if name not in _FACTORIES:
         raise ConfigError(
             expect("policy", f"one of {policy_names()}", name, "pick a listed policy")

@@ -1,0 +1,21 @@
+"""Deployment without torch: ONNX Runtime student, scan adapter, mixture read-outs.
+
+It never imports torch (a test blocks the import and runs a step), nor the controllers.
+"""
+
+from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
+from pioneer.deploy.runtime import (
+    Decision,
+    OnnxStudentPolicy,
+    StudentRuntime,
+    make_onnx_student_policy,
+)
+
+__all__ = [
+    "Decision",
+    "OnnxStudentPolicy",
+    "StudentRuntime",
+    "make_onnx_student_policy",
+    "mixture_action",
+    "mixture_uncertainty",
+]
