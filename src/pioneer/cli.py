@@ -87,19 +87,15 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
     return 0
 
 
-def _default_features(scenarios: tuple[str, ...]) -> str:
-    return "xy" if scenarios == ("static",) else "obs_action"
-
-
 def _cmd_reward_fit(args: argparse.Namespace) -> int:
-    from pioneer.demos.dataset import Dataset, feature_map
+    from pioneer.demos.dataset import Dataset, default_feature_map, feature_map
     from pioneer.reward.density import DensityConfig, DensityReward
     from pioneer.reward.select import select_length_scale
 
     d = Dataset.load(args.demos)
     if args.min_gamma is not None:
         d = d.filter(min_gamma=args.min_gamma)
-    fm = feature_map(args.features or _default_features(d.scenarios))
+    fm = feature_map(args.features or default_feature_map(d.scenarios))
     z = fm.from_dataset(d)
     cfg = DensityConfig(
         length_scale=args.length_scale,
@@ -134,7 +130,7 @@ def _cmd_reward_fit(args: argparse.Namespace) -> int:
 def _cmd_reward_show(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from pioneer.demos.dataset import Dataset, feature_map
+    from pioneer.demos.dataset import Dataset, default_feature_map, feature_map
     from pioneer.reward.density import DensityReward
     from pioneer.stats import auroc
 
@@ -153,9 +149,9 @@ def _cmd_reward_show(args: argparse.Namespace) -> int:
     if demos:
         d = Dataset.load(demos)
         r = m(
-            feature_map(str(m.info_.get("features", _default_features(d.scenarios)))).from_dataset(
-                d
-            )
+            feature_map(
+                str(m.info_.get("features", default_feature_map(d.scenarios)))
+            ).from_dataset(d)
         )
         pos, neg = d.gamma > 0, d.gamma < 0
         out["demos"] = str(demos)

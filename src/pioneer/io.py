@@ -15,7 +15,7 @@ import numpy as np
 
 from pioneer.errors import DataError, expect
 
-__all__ = ["atomic_path", "load_npz"]
+__all__ = ["atomic_path", "load_npz", "write_text_atomic"]
 
 # Read once at import (reading the umask means setting it; not thread-safe later on).
 _UMASK = os.umask(0)
@@ -56,3 +56,9 @@ def load_npz(path: str | os.PathLike[str], what: str, fix: str) -> dict[str, Any
         raise DataError(
             expect(f"{what} {p}", "a readable .npz", f"unreadable ({exc})", fix)
         ) from exc
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` through :func:`atomic_path`."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)

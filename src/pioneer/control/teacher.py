@@ -183,7 +183,9 @@ def default_reward(scenario: str) -> DensityReward:
 
 def default_features(scenario: str) -> str:
     """``xy`` for the static study, ``obs_action`` for the elevator scenarios."""
-    return "xy" if scenario.startswith("static") else "obs_action"
+    from pioneer.demos.dataset import default_feature_map
+
+    return default_feature_map([scenario])
 
 
 def make_teacher(

@@ -24,7 +24,7 @@ from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path, load_npz
 from pioneer.sim.lidar import observation_names
 
-__all__ = ["FORMAT", "Dataset", "FeatureMap", "feature_map"]
+__all__ = ["FORMAT", "Dataset", "FeatureMap", "default_feature_map", "feature_map"]
 
 FORMAT = "pioneer.demos/1"
 OBS_DIM = 29
@@ -320,3 +320,8 @@ def feature_map(name: str) -> FeatureMap:
     if name == "obs_action":
         return FeatureMap("obs_action", (*observation_names(), "v", "omega"))
     raise DataError(expect("feature map", "'xy' or 'obs_action'", name, "pick one"))
+
+
+def default_feature_map(scenarios: Sequence[str]) -> str:
+    """``xy`` when every scenario is the static study, else ``obs_action`` (the elevator)."""
+    return "xy" if scenarios and all(s.startswith("static") for s in scenarios) else "obs_action"

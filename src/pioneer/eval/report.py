@@ -8,14 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from pioneer.eval.tables import csv_table, markdown_table, table_rows
-from pioneer.io import atomic_path
+from pioneer.io import write_text_atomic
 
 __all__ = ["write_summary"]
-
-
-def _write(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
 
 
 def write_summary(
@@ -43,7 +38,7 @@ def write_summary(
         csv = csv_table(rows, table)
         csv_parts.append(csv if not csv_parts else csv.split("\n", 1)[1])
     md = "\n".join(md_parts)
-    _write(out / "summary.json", json.dumps(summary, indent=2))
-    _write(out / "summary.md", md)
-    _write(out / "summary.csv", "".join(csv_parts))
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))
+    write_text_atomic(out / "summary.md", md)
+    write_text_atomic(out / "summary.csv", "".join(csv_parts))
     return md

@@ -22,7 +22,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
-from pioneer.io import atomic_path
+from pioneer.io import write_text_atomic
 
 __all__ = ["PROFILES", "Profile", "reproduce"]
 
@@ -39,11 +39,6 @@ PROFILES = {"quick": Profile(seeds=2, trials=10), "paper": Profile(seeds=5, tria
 SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 BASELINES = ("cvar-bf",)  # paper Table I; CrowdNav++ joins when it is trained
-
-
-def _write(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
 
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
@@ -99,7 +94,7 @@ def reproduce(
     )
     figures = _figures(out, reward_tpl)
     elapsed = time.perf_counter() - t0
-    _write(out / "index.md", _index(profile, prof, md, figures, elapsed, len(records)))
+    write_text_atomic(out / "index.md", _index(profile, prof, md, figures, elapsed, len(records)))
     head = {
         k: summary[f"{k}/teacher"]["success_rate"]["mean"]
         for k in SCENARIOS
