@@ -19,7 +19,12 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``pysocialforce_step``  the same scene in the ``pysocialforce`` package, and ours/theirs
 - ``raycast_batch``       ``cast_rays`` for 1,200 poses x 72 beams              <= 2 ms
 - ``world_step_batch``    ``step`` on 120 copies x 10 steps of 0.3 s            <= 3 ms
+- ``student_decision``    student scan → command via ONNX Runtime              <= 0.2 ms
+                          obs → command via PyTorch                            <= 1 ms
+                          and the teacher/student decision-time ratio
+- ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
+- ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 15 min
 """
 
 from __future__ import annotations
@@ -831,6 +836,136 @@ def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
     }
 
 
+# --------------------------------------------------------------------------------------------
+# Student (issue 6): decision time, teacher/student ratio, deploy memory, a full DAgger run
+
+
+def _scan_360(seed: int) -> tuple[np.ndarray, float, float, float]:
+    """A synthetic 360-beam laser scan (1° steps, range_max 10 m, a few ``inf`` returns)."""
+    rng = np.random.default_rng(seed)
+    ranges = rng.uniform(0.4, 6.0, size=360)
+    ranges[rng.random(360) < 0.05] = np.inf
+    return ranges, -math.pi, 2 * math.pi / 360, 10.0
+
+
+def bench_student_decision(plan: Plan) -> dict[str, Any]:
+    """Student decision (batch 1): scan → command through ONNX Runtime (the deploy runtime,
+    resampling included), observation → command through PyTorch, and the teacher's decision
+    in the same round-robin, for the teacher/student ratio. Weights do not change the cost, so
+    a freshly initialised MDN of the SPEC architecture is timed."""
+    import torch
+
+    from pioneer.control.teacher import make_teacher
+    from pioneer.deploy import StudentRuntime
+    from pioneer.learn import build_student, export_onnx
+    from pioneer.learn.policy import StudentPolicy
+
+    torch.set_num_threads(1)
+    model = build_student(seed=SEED + 50)
+    policy = StudentPolicy(model)
+    _, world, state = elevator_setup(SEED + 51)
+    obs = observe(world, state)[0]
+    teacher = make_teacher("hr-rl")
+    ranges, amin, inc, rmax = _scan_360(SEED + 52)
+    goal = np.array([2.0, 0.5])
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-onnx-") as tmp:
+        path = export_onnx(model, Path(tmp) / "student.onnx")
+        runtime = StudentRuntime(path)
+        cases = {
+            "onnx_scan": Case(lambda _: runtime.step(ranges, amin, inc, rmax, goal)),
+            "torch_obs": Case(lambda _: policy.act(obs, {})),
+            "teacher": Case(lambda _: teacher.decide(world, state)),
+        }
+        secs = time_cases(cases, plan.batch_repeats, warmup=5)
+    onnx_ms, torch_ms, teacher_ms = (float(np.median(secs[k])) * 1e3 for k in cases)
+    return {
+        "metrics": {
+            "ms_onnx_scan_to_command": metric(secs["onnx_scan"] * 1e3, "ms", ("<=", 0.2)),
+            "ms_torch_obs_to_command": metric(secs["torch_obs"] * 1e3, "ms", ("<=", 1.0)),
+            "ms_teacher_decision": metric(secs["teacher"] * 1e3, "ms"),
+            "teacher_over_student_onnx": metric([teacher_ms / onnx_ms], "x"),
+            "teacher_over_student_torch": metric([teacher_ms / torch_ms], "x"),
+        },
+        "info": {"scan_beams": 360, "threads": 1, "model": "MDN 29-128-128-K10"},
+    }
+
+
+DEPLOY_CHILD = """
+import json, resource, sys, tempfile, math
+sys.modules["torch"] = None  # the robot runtime must not need torch
+import numpy as np
+from pioneer.deploy import StudentRuntime
+rt = StudentRuntime({onnx!r})
+rng = np.random.default_rng({seed})
+for _ in range({n}):
+    ranges = rng.uniform(0.4, 6.0, size=360)
+    rt.step(ranges, -math.pi, 2 * math.pi / 360, 10.0, np.array([2.0, 0.5]))
+print(json.dumps({{"rss_peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+                  "torch": "torch" in sys.modules and sys.modules["torch"] is not None}}))
+"""
+
+
+def bench_deploy_memory(plan: Plan) -> dict[str, Any]:
+    """Peak RSS of a fresh process running the torch-free deploy runtime for 1,000 scans."""
+    from pioneer.learn import build_student, export_onnx
+
+    peaks = []
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-deploy-") as tmp:
+        path = export_onnx(build_student(seed=SEED + 60), Path(tmp) / "student.onnx")
+        code = DEPLOY_CHILD.format(onnx=str(path), seed=SEED + 61, n=1000)
+        for k in range(plan.memory_repeats + 1):  # run 0 only fills the numba cache
+            proc = subprocess.run(
+                [sys.executable, "-S", "-c", MEMORY_LAUNCHER, code],
+                cwd=REPO,
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+            lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+            if not lines:
+                raise RuntimeError(f"deploy child failed: {proc.stderr[-2000:]}")
+            rec = json.loads(lines[-1])
+            if k > 0:
+                peaks.append(rec["rss_peak_kb"] / 1024)
+    return {
+        "metrics": {"peak_rss_mb": metric(peaks, "MB", ("<", 200.0))},
+        "info": {"scans": 1000, "torch_imported": False, "runtime": "onnxruntime, 1 thread"},
+    }
+
+
+def bench_dagger_run(plan: Plan) -> dict[str, Any]:
+    """Wall time of a full DAgger run (50 + 10 × 50 episodes, HR-RL, MDN, 2 workers) through
+    the CLI. Opt-in (``--only dagger_run``): it takes minutes."""
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-dagger-") as tmp:
+        t0 = time.perf_counter()
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pioneer.cli",
+                "distill",
+                "--scenario",
+                SCENARIO,
+                "--out",
+                str(Path(tmp) / "dagger"),
+                "--workers",
+                "2",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise RuntimeError(f"distill failed: {proc.stderr[-2000:]}")
+        curves = (Path(tmp) / "dagger" / "curves.csv").read_text().splitlines()
+    return {
+        "metrics": {"minutes_full_run": metric([wall / 60], "min", ("<=", 15.0))},
+        "info": {"episodes": 550, "workers": 2, "last_round": curves[-1]},
+    }
+
+
 BENCHMARKS = (
     "env_step",
     "pysocialforce_step",
@@ -840,8 +975,12 @@ BENCHMARKS = (
     "density_eval",
     "teacher_decision",
     "cvar_bf_decision",
+    "student_decision",
+    "deploy_memory",
     "memory",
+    "dagger_run",
 )
+OPT_IN = ("dagger_run",)  # run only when named with --only (minutes long)
 
 
 def machine_info() -> dict[str, Any]:
@@ -905,6 +1044,12 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
                 res = bench_teacher_decision(plan)
             elif name == "cvar_bf_decision":
                 res = bench_cvar_bf_decision(plan)
+            elif name == "student_decision":
+                res = bench_student_decision(plan)
+            elif name == "deploy_memory":
+                res = bench_deploy_memory(plan)
+            elif name == "dagger_run":
+                res = bench_dagger_run(plan)
             else:
                 res = bench_memory(plan)
         except Exception as exc:
@@ -1047,7 +1192,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.reuse_numba_cache and FRESH_CACHE_ENV not in os.environ:
         return _rerun_with_fresh_numba_cache(sys.argv[1:] if argv is None else argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    names = list(args.only) if args.only else list(BENCHMARKS)
+    names = list(args.only) if args.only else [b for b in BENCHMARKS if b not in OPT_IN]
     plan = QUICK if args.quick else FULL
     from threadpoolctl import threadpool_limits
 

@@ -228,6 +228,51 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_distill(args: argparse.Namespace) -> int:
+    from pioneer.learn.dagger import DaggerConfig, run_dagger
+
+    cfg = DaggerConfig(
+        scenario=args.scenario,
+        student=args.student,
+        teacher_episodes=args.teacher_episodes,
+        rounds=args.rounds,
+        episodes_per_round=args.episodes_per_round,
+        epochs_initial=args.epochs_initial,
+        epochs_per_round=args.epochs_per_round,
+        seed=args.seed,
+    )
+    res = run_dagger(cfg, args.out, args.workers, reward=args.reward)
+    last = res.curves[-1]
+    print(
+        f"student: {res.student}  ({last['frames_total']} frames, last round SR "
+        f"{100 * last['success_rate']:.0f}%); curves: {res.out / 'curves.png'}"
+    )
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from pioneer.learn.export import export_checkpoint
+
+    print(json.dumps(export_checkpoint(args.model, args.out, action_mode=args.action_mode)))
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from pioneer.deploy.bag import replay_bag
+
+    summary = replay_bag(
+        args.bag,
+        args.model,
+        args.out,
+        goal=args.goal,
+        goal_frame=args.goal_frame,
+        scan_topic=args.scan_topic,
+        odom_topic=args.odom_topic,
+    )
+    print(json.dumps(summary))
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pioneer", description="PioneeR social navigation toolkit")
     sub = p.add_subparsers(dest="command", required=True)
@@ -258,6 +303,36 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", default="out/reproduce")
     rp.add_argument("--workers", type=int, help="processes (default: all cores)")
     rp.set_defaults(func=_cmd_reproduce)
+
+    d = sub.add_parser("distill", help="DAgger: distil the teacher into a LiDAR-only student")
+    d.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, …")
+    d.add_argument("--student", choices=["mdn", "mlp"], default="mdn")
+    d.add_argument("--out", required=True, help="output folder (resumes if it exists)")
+    d.add_argument("--teacher-episodes", type=int, default=50, help="round 0 episodes")
+    d.add_argument("--rounds", type=int, default=10, help="student-driven rounds")
+    d.add_argument("--episodes-per-round", type=int, default=50)
+    d.add_argument("--epochs-initial", type=int, default=40, help="epochs after round 0")
+    d.add_argument("--epochs-per-round", type=int, default=10, help="epochs after later rounds")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--workers", type=int, help="processes collecting episodes (default: cores)")
+    d.add_argument("--reward", help="teacher reward model .npz (default: fit on shipped demos)")
+    d.set_defaults(func=_cmd_distill)
+
+    x = sub.add_parser("export", help="student checkpoint → ONNX, with a parity check")
+    x.add_argument("--model", required=True, help="student .safetensors or a distill folder")
+    x.add_argument("--out", required=True, help="output .onnx")
+    x.add_argument("--action-mode", choices=["mode", "mean"], help="default: the model's")
+    x.set_defaults(func=_cmd_export)
+
+    rb = sub.add_parser("replay", help="ROS bag LaserScans → student commands CSV (no ROS)")
+    rb.add_argument("--bag", required=True, help="ROS 1 .bag file or ROS 2 bag folder")
+    rb.add_argument("--model", required=True, help="student .onnx (from pioneer export)")
+    rb.add_argument("--out", required=True, help="output CSV")
+    rb.add_argument("--goal", nargs=2, type=float, required=True, metavar=("X", "Y"), help="[m]")
+    rb.add_argument("--goal-frame", choices=["robot", "odom"], default="robot")
+    rb.add_argument("--scan-topic", help="LaserScan topic (default: the bag's only one)")
+    rb.add_argument("--odom-topic", help="Odometry topic for --goal-frame odom (default: only)")
+    rb.set_defaults(func=_cmd_replay)
 
     demos = sub.add_parser("demos", help="demonstration datasets").add_subparsers(
         dest="demos_command", required=True

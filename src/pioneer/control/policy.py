@@ -55,8 +55,8 @@ def policy_names() -> list[str]:
 
 def policy_factory(name: str) -> Callable[..., Policy]:
     """The factory registered under ``name``."""
-    if name.startswith("student") and name not in _FACTORIES:
-        # The students live in pioneer.learn (torch); register them on first use only.
+    if (name.startswith("student") or name == "crowdnav++") and name not in _FACTORIES:
+        # The students and CrowdNav++ live in pioneer.learn (torch); register them on first use.
         try:
             import pioneer.learn  # noqa: F401
         except ImportError as exc:

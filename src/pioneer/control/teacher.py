@@ -123,9 +123,16 @@ class LookaheadTeacher:
         self.last = self.decide(info["world"], info["state"])
         return self.last.command
 
-    def decide(self, world: World, state: State) -> Decision:
-        """Score all candidates from ``state`` (B = 1) and return the smoothed command."""
+    def decide(self, world: World, state: State, prev: F64 | None = None) -> Decision:
+        """Score all candidates from ``state`` (B = 1) and return the smoothed command.
+
+        ``prev`` replaces the teacher's own previous command u_{t−1} in the smoothing; a
+        labeller (DAgger) or a shield passes the command actually applied (``state.command``),
+        so the label is what the teacher would send had it been driving.
+        """
         cfg = self.config
+        if prev is not None:
+            self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
         w = cfg.weights
         ro = rollout(world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model)
         c, n_l = ro.robot.shape[:2]

@@ -1,4 +1,4 @@
-"""Data shipped with the package: default demonstration datasets."""
+"""Data shipped with the package: default demonstration datasets and trained students."""
 
 from __future__ import annotations
 
@@ -6,9 +6,10 @@ from pathlib import Path
 
 from pioneer.errors import DataError, expect
 
-__all__ = ["base_scenario", "shipped_demos"]
+__all__ = ["base_scenario", "shipped_demos", "shipped_student"]
 
 DEMOS_DIR = Path(__file__).parent / "demos"
+STUDENTS_DIR = Path(__file__).parent / "students"
 
 
 def base_scenario(scenario: str) -> str:
@@ -22,4 +23,20 @@ def shipped_demos(scenario: str) -> Path:
     if not p.is_file():
         names = sorted(q.stem for q in DEMOS_DIR.glob("*.npz"))
         raise DataError(expect("shipped demos", f"one of {names}", scenario, "pass --demos FILE"))
+    return p
+
+
+def shipped_student(scenario: str, kind: str = "mdn") -> Path:
+    """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``."""
+    p = STUDENTS_DIR / f"{base_scenario(scenario)}-{kind}.safetensors"
+    if not p.is_file():
+        names = sorted(q.stem for q in STUDENTS_DIR.glob("*.safetensors"))
+        raise DataError(
+            expect(
+                "shipped student",
+                f"one of {names}",
+                f"{scenario}-{kind}",
+                "train one with `pioneer distill` and pass checkpoint=PATH",
+            )
+        )
     return p

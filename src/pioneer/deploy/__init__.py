@@ -1,8 +1,9 @@
-"""Deployment without torch: ONNX Runtime student, scan adapter, mixture read-outs.
+"""Deployment without torch: ONNX Runtime student, scan adapter, mixture read-outs, bag replay.
 
 It never imports torch (a test blocks the import and runs a step), nor the controllers.
 """
 
+from pioneer.deploy.bag import replay_bag
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
 from pioneer.deploy.runtime import (
     Decision,
@@ -18,4 +19,5 @@ __all__ = [
     "make_onnx_student_policy",
     "mixture_action",
     "mixture_uncertainty",
+    "replay_bag",
 ]

@@ -48,13 +48,43 @@ class EpisodeRecord:
     min_clearance_m: float  # minimum over the episode (inf if no humans)
     time_close_s: float  # time with clearance below 0.8 m
     steps: int
+    # Per-frame series of policies that report uncertainty (students): "clearance" [m] at
+    # decision time, "aleatoric" and "epistemic" [(m/s)² + (rad/s)²], and for a shield
+    # "shielded" (0/1). None for other policies.
+    frames: dict[str, list[float]] | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict; an infinite clearance becomes ``None``."""
+        """Plain dict; an infinite clearance becomes ``None``; no ``frames`` key without
+        frames; frame values rounded to 6 significant digits (a compact JSON line)."""
         d = dataclasses.asdict(self)
         if not math.isfinite(d["min_clearance_m"]):
             d["min_clearance_m"] = None
+        if self.frames is None:
+            del d["frames"]
+        else:
+            d["frames"] = {k: [_compact(x) for x in v] for k, v in self.frames.items()}
         return d
+
+
+def _compact(x: float) -> float | None:
+    """``x`` to 6 significant digits; non-finite (inf clearance, NaN) → ``None``."""
+    return float(f"{x:.6g}") if math.isfinite(x) else None
+
+
+def _frame_series(policy: Policy, clearance: list[float]) -> dict[str, list[float]] | None:
+    """The per-frame series of a policy that reports ``uncertainty`` (one pair per step)."""
+    unc = getattr(policy, "uncertainty", None)
+    if unc is None or len(unc) != len(clearance):
+        return None
+    out = {
+        "clearance": clearance,
+        "aleatoric": [float(a) for a, _ in unc],
+        "epistemic": [float(e) for _, e in unc],
+    }
+    shielded = getattr(policy, "shielded", None)
+    if shielded is not None and len(shielded) == len(clearance):
+        out["shielded"] = [float(s) for s in shielded]
+    return out
 
 
 def run_episode(
@@ -73,7 +103,9 @@ def run_episode(
     close = 0.0
     steps = 0
     event = None
+    decision_clearance: list[float] = []  # clearance of the state each command was chosen in
     while event is None:
+        decision_clearance.append(float(info["min_clearance"]))
         obs, _, _, _, info = env.step(policy.act(obs, info))
         steps += 1
         if info["min_clearance"] < close_threshold:
@@ -91,5 +123,6 @@ def run_episode(
         min_clearance_m=info["episode_min_clearance"],
         time_close_s=close,
         steps=steps,
+        frames=_frame_series(policy, decision_clearance),
     )
     return rec, (Trajectory(env.world, states) if record else None)

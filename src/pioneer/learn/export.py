@@ -15,6 +15,9 @@ The file's metadata (``metadata_props``) carries the format tag, the kind, the a
 and the :class:`~pioneer.learn.models.StudentConfig` as JSON. Exported with PyTorch's
 TorchScript-based exporter (``dynamo=False``): it needs no extra package and the graph is
 small and static.
+
+:func:`export_checkpoint` is ``pioneer export``: a checkpoint (or a DAgger output folder) in,
+an ONNX file out, written only if :func:`parity_check` finds ONNX Runtime and PyTorch agree.
 """
 
 from __future__ import annotations
@@ -22,20 +25,34 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.deploy.runtime import ONNX_FORMAT
-from pioneer.errors import ConfigError, expect
+from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path
-from pioneer.learn.models import MDN, Student, select_action, uncertainty
+from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
 
-__all__ = ["MDN_OUTPUTS", "MLP_OUTPUTS", "ONNX_FORMAT", "export_onnx"]
+__all__ = [
+    "CHECKPOINT_FILE",
+    "MDN_OUTPUTS",
+    "MLP_OUTPUTS",
+    "ONNX_FORMAT",
+    "PARITY_TOL",
+    "export_checkpoint",
+    "export_onnx",
+    "parity_check",
+]
 
 MDN_OUTPUTS: tuple[str, ...] = ("action", "aleatoric", "epistemic", "logits", "mu", "sigma")
 MLP_OUTPUTS: tuple[str, ...] = ("action",)
+CHECKPOINT_FILE = "student.safetensors"  # the final student in a DAgger output folder
+PARITY_TOL = 1e-4  # max |ONNX Runtime − PyTorch| accepted by export_checkpoint (float32 graph)
+PARITY_OBS = 64  # random observations in export_checkpoint's parity check
 
 
 class _MDNGraph(nn.Module):
@@ -102,3 +119,84 @@ def export_onnx(
     finally:
         model.train(was_training)
     return target
+
+
+def parity_check(
+    model: Student, onnx_path: str | Path, n: int = 64, seed: int = 0
+) -> dict[str, float]:
+    """Max ``|ONNX Runtime − PyTorch|`` of each output of the graph at ``onnx_path`` against
+    ``model`` (eval mode), on ``n`` observations drawn around the model's input statistics
+    (mean ± 2 std, from a generator seeded by ``seed``)."""
+    import onnxruntime as ort
+
+    rng = np.random.default_rng(seed)
+    mean = model.obs_mean.detach().cpu().numpy().astype(np.float64)
+    std = model.obs_std.detach().cpu().numpy().astype(np.float64)
+    obs = (mean + 2.0 * std * rng.standard_normal((n, mean.size))).astype(np.float32)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.log_severity_level = 3
+    sess = ort.InferenceSession(str(onnx_path), opts, providers=["CPUExecutionProvider"])
+    names = [o.name for o in sess.get_outputs()]
+    got = sess.run(names, {"obs": obs})
+    mode = sess.get_modelmeta().custom_metadata_map.get("action_mode", "mode")
+    graph: nn.Module = _MDNGraph(model, mode) if isinstance(model, MDN) else model
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            out = graph(torch.from_numpy(obs))
+    finally:
+        model.train(was_training)
+    want = out if isinstance(out, tuple) else (out,)
+    return {
+        name: float(np.max(np.abs(g - w.numpy())))
+        for name, g, w in zip(names, got, want, strict=True)
+    }
+
+
+def export_checkpoint(
+    model_path: str | Path, out: str | Path, action_mode: str | None = None, opset: int = 17
+) -> dict[str, Any]:
+    """``pioneer export``: load the student at ``model_path`` (a ``.safetensors`` checkpoint
+    from :func:`~pioneer.learn.models.save_student`, or a folder holding
+    :data:`CHECKPOINT_FILE`, as ``pioneer distill`` writes), export it to ``out`` and check
+    parity on random observations. ``out`` is written only if every output agrees within
+    :data:`PARITY_TOL`; otherwise :class:`DataError`. Returns a JSON-able summary.
+    """
+    p = Path(model_path)
+    if p.is_dir():
+        p = p / CHECKPOINT_FILE
+    if not p.is_file():
+        raise DataError(
+            expect(
+                "--model",
+                f"a student .safetensors checkpoint or a folder holding {CHECKPOINT_FILE}",
+                str(model_path),
+                "check the path (pioneer distill writes OUT/student.safetensors)",
+            )
+        )
+    model = load_student(p)
+    target = Path(out)
+    with atomic_path(target) as tmp:
+        export_onnx(model, tmp, opset=opset, action_mode=action_mode)
+        diffs = parity_check(model, tmp, n=PARITY_OBS)
+        worst = max(diffs.values())
+        if not worst <= PARITY_TOL:
+            raise DataError(
+                expect(
+                    f"ONNX parity of {p}",
+                    f"max |ONNX Runtime − PyTorch| <= {PARITY_TOL}",
+                    diffs,
+                    "check the torch and onnxruntime versions; nothing was written",
+                )
+            )
+    mode = (action_mode or model.config.action_mode) if isinstance(model, MDN) else "regression"
+    return {
+        "out": str(target),
+        "model": str(p),
+        "kind": model.config.kind,
+        "action_mode": mode,
+        "opset": opset,
+        "parity": {"observations": PARITY_OBS, "max_abs_diff": worst, "outputs": diffs, "ok": True},
+    }

@@ -68,7 +68,7 @@ class StudentPolicy:
 
 
 def make_student_policy(
-    checkpoint: str | Path,
+    checkpoint: str | Path | None = None,
     scenario: str | None = None,
     kind: str | None = None,
     name: str | None = None,
@@ -77,10 +77,20 @@ def make_student_policy(
 ) -> StudentPolicy:
     """Policy factory: load ``checkpoint`` (``{scenario}`` filled in) as a :class:`StudentPolicy`.
 
-    ``kind`` ("mdn" | "mlp"), when given, must match the checkpoint. ``torch_threads`` sets
-    torch's intra-op threads for this process (1 by default: a batch-1 forward pass gains
-    nothing from threads, and evaluation runs one worker per core); ``None`` leaves it.
+    Without ``checkpoint``: the shipped DAgger student of ``scenario`` and ``kind`` (default
+    "mdn"; :func:`pioneer.data.shipped_student`). ``kind`` ("mdn" | "mlp"), when given, must
+    match the checkpoint. ``torch_threads`` sets torch's intra-op threads for this process
+    (1 by default: a batch-1 forward pass gains nothing from threads, and evaluation runs one
+    worker per core); ``None`` leaves it.
     """
+    if checkpoint is None:
+        from pioneer.data import shipped_student
+
+        if scenario is None:
+            raise ConfigError(
+                expect("student policy", "checkpoint=PATH or a scenario", None, "pass one")
+            )
+        checkpoint = shipped_student(scenario, kind or "mdn")
     path = str(checkpoint).format(scenario=scenario) if scenario is not None else str(checkpoint)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))

@@ -1,16 +1,18 @@
-"""Static plots (matplotlib, Agg backend): trajectories of an episode."""
+"""Static plots (matplotlib, Agg backend): trajectories of an episode, learning curves."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pioneer.io import atomic_path
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
 
-__all__ = ["plot_trajectory"]
+__all__ = ["plot_learning_curve", "plot_trajectory"]
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
@@ -52,6 +54,39 @@ def plot_trajectory(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def plot_learning_curve(
+    curve: Mapping[str, ArrayLike], path: str | os.PathLike[str], title: str = ""
+) -> None:
+    """Plot an RL learning curve into a PNG (atomically).
+
+    ``curve`` maps column names to equal-length arrays: ``env_steps`` (x axis) and
+    ``mean_return``; optional ``success_rate``, ``collision_rate``, ``timeout_rate`` (fractions
+    in [0, 1]) go to a second panel. NaN entries (no finished episode yet) are skipped.
+    """
+    plt = _pyplot()
+    x = np.asarray(curve["env_steps"], dtype=np.float64)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 5), dpi=120, sharex=True)
+    ax1.plot(x, np.asarray(curve["mean_return"], dtype=np.float64), color="tab:blue")
+    ax1.set_ylabel("mean episode return")
+    ax1.grid(alpha=0.3)
+    colors = {"success_rate": "tab:green", "collision_rate": "tab:red", "timeout_rate": "tab:gray"}
+    for key, color in colors.items():
+        if key in curve:
+            y = 100.0 * np.asarray(curve[key], dtype=np.float64)
+            ax2.plot(x, y, color=color, label=key.removesuffix("_rate"))
+    ax2.set_ylabel("episodes (%)")
+    ax2.set_ylim(-2, 102)
+    ax2.set_xlabel("environment steps")
+    ax2.legend(loc="best", fontsize=8)
+    ax2.grid(alpha=0.3)
+    if title:
+        ax1.set_title(title)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
