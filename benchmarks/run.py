@@ -25,6 +25,8 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
 - ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 15 min
+- ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights, 1 thread      <= 1 ms
+- ``crowdnav_train_throughput``  PPO trainer env steps/s, 16 and 32 envs       >= 2,000 /s (32)
 """
 
 from __future__ import annotations
@@ -966,6 +968,75 @@ def bench_dagger_run(plan: Plan) -> dict[str, Any]:
     }
 
 
+# --------------------------------------------------------------------------------------------
+# CrowdNav++ (issue 5): decision time with the shipped weights, PPO trainer throughput
+
+
+def bench_crowdnav_decision(plan: Plan) -> dict[str, Any]:
+    """CrowdNav++ ``policy.act`` (graph observation from the privileged state, attention, GRU
+    step, increments → command) over the states of seeded HR-RL episodes, shipped weights,
+    one torch thread."""
+    from pioneer.control.policy import build_policy
+    from pioneer.sim.env import NavEnv
+
+    env = NavEnv("hr-rl")
+    policy = build_policy("crowdnav++", "hr-rl")  # sets torch to 1 thread
+    times: list[float] = []
+    for ep in range(plan.cvar_episodes):  # the same episode count as CVaR-BF's benchmark
+        obs, info = env.reset(seed=SEED + 70 + ep)
+        policy.reset(info, np.random.default_rng(SEED + 70 + ep))
+        for _ in range(5):  # warm-up: first calls allocate
+            policy.act(obs, info)
+        policy.reset(info, np.random.default_rng(SEED + 70 + ep))
+        done = False
+        while not done:
+            t0 = time.perf_counter()
+            u = policy.act(obs, info)
+            times.append(time.perf_counter() - t0)
+            obs, _, term, trunc, info = env.step(u)
+            done = term or trunc
+    secs = np.asarray(times)
+    return {
+        "metrics": {
+            "ms_decision": metric(secs * 1e3, "ms", ("<=", 1.0)),
+            "ms_decision_p90": metric([float(np.percentile(secs, 90) * 1e3)], "ms"),
+        },
+        "info": {"decisions": int(secs.size), "episodes": plan.cvar_episodes, "threads": 1},
+    }
+
+
+def bench_crowdnav_train_throughput(plan: Plan) -> dict[str, Any]:
+    """Environment steps/s of the CrowdNav++ PPO trainer (rollout + update, HR-RL, one torch
+    thread), per update after a warm-up one, with 16 (the original's) and 32 environments."""
+    import torch
+
+    from pioneer.learn.crowdnav import CrowdNavConfig
+    from pioneer.learn.ppo import PPOConfig, RewardConfig, _Trainer
+
+    torch.set_num_threads(1)
+    metrics: dict[str, Any] = {}
+    n_updates = 3 if plan == QUICK else 8
+    targets: dict[int, tuple[str, float] | None] = {16: None, 32: (">=", 2000.0)}
+    for n_envs, target in targets.items():
+        tr = _Trainer(
+            get_scenario(SCENARIO),
+            PPOConfig(n_envs=n_envs, seed=SEED % 1000),
+            CrowdNavConfig(max_humans=3),
+            RewardConfig(),
+        )
+        tr.learn(tr.rollout())
+        rates = []
+        for _ in range(n_updates):
+            t0 = time.perf_counter()
+            tr.learn(tr.rollout())
+            rates.append(tr.ppo.steps_per_update / (time.perf_counter() - t0))
+        metrics[f"steps_per_s_{n_envs}_envs"] = metric(rates, "steps/s", target)
+    return {
+        "metrics": metrics,
+        "info": {"rollout": 30, "epochs": 5, "minibatches": 2, "threads": 1, "updates": n_updates},
+    }
+
+
 BENCHMARKS = (
     "env_step",
     "pysocialforce_step",
@@ -979,6 +1050,8 @@ BENCHMARKS = (
     "deploy_memory",
     "memory",
     "dagger_run",
+    "crowdnav_decision",
+    "crowdnav_train_throughput",
 )
 OPT_IN = ("dagger_run",)  # run only when named with --only (minutes long)
 
@@ -1050,6 +1123,10 @@ def run_benchmarks(names: list[str], plan: Plan) -> dict[str, dict[str, Any]]:
                 res = bench_deploy_memory(plan)
             elif name == "dagger_run":
                 res = bench_dagger_run(plan)
+            elif name == "crowdnav_decision":
+                res = bench_crowdnav_decision(plan)
+            elif name == "crowdnav_train_throughput":
+                res = bench_crowdnav_train_throughput(plan)
             else:
                 res = bench_memory(plan)
         except Exception as exc:

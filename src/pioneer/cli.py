@@ -273,6 +273,30 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train_crowdnav(args: argparse.Namespace) -> int:
+    from pioneer.learn.ppo import PPOConfig, train_crowdnav
+
+    ppo = PPOConfig(
+        total_steps=args.steps,
+        n_envs=args.envs,
+        lr=args.lr,
+        seed=args.seed,
+        checkpoint_every=args.checkpoint_every,
+    )
+    cmd = " ".join(["pioneer", *sys.argv[1:]]) if sys.argv[0].endswith("pioneer") else ""
+    summary = train_crowdnav(
+        args.scenario,
+        args.out,
+        ppo,
+        resume=True if args.resume else None,
+        command=cmd,
+        torch_threads=args.threads,
+    )
+    print(json.dumps({"out": args.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
+    print(json.dumps({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pioneer", description="PioneeR social navigation toolkit")
     sub = p.add_subparsers(dest="command", required=True)
@@ -333,6 +357,23 @@ def _parser() -> argparse.ArgumentParser:
     rb.add_argument("--scan-topic", help="LaserScan topic (default: the bag's only one)")
     rb.add_argument("--odom-topic", help="Odometry topic for --goal-frame odom (default: only)")
     rb.set_defaults(func=_cmd_replay)
+
+    train = sub.add_parser("train", help="train an RL baseline").add_subparsers(
+        dest="train_command", required=True
+    )
+    tc = train.add_parser("crowdnav++", help="CrowdNav++ with PPO (resumes an existing --out)")
+    tc.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, …")
+    tc.add_argument("--out", required=True, help="output folder (checkpoint, policy, curve)")
+    tc.add_argument("--steps", type=int, default=2_000_000, help="total environment steps")
+    tc.add_argument("--envs", type=int, default=16, help="environments stepped together")
+    tc.add_argument("--seed", type=int, default=0)
+    tc.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
+    tc.add_argument("--checkpoint-every", type=int, default=50, help="[updates]")
+    tc.add_argument("--threads", type=int, default=1, help="torch threads")
+    tc.add_argument(
+        "--resume", action="store_true", help="require a checkpoint in --out (default: if any)"
+    )
+    tc.set_defaults(func=_cmd_train_crowdnav)
 
     demos = sub.add_parser("demos", help="demonstration datasets").add_subparsers(
         dest="demos_command", required=True

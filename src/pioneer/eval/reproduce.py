@@ -43,7 +43,7 @@ SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
-BASELINES = ("cvar-bf",)  # paper Table I; CrowdNav++ joins when it is trained
+BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: the shipped PPO weights)
 
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:

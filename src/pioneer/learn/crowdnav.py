@@ -135,7 +135,9 @@ class CrowdNavConfig(Config):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < 0.0 < hi):
                 raise ConfigError(
-                    expect(f"CrowdNavConfig.{name}", "(low < 0 < high)", (lo, hi), "e.g. (-0.1, 0.1)")
+                    expect(
+                        f"CrowdNavConfig.{name}", "(low < 0 < high)", (lo, hi), "e.g. (-0.1, 0.1)"
+                    )
                 )
         if not math.isfinite(self.log_std_init):
             raise ConfigError(
@@ -195,13 +197,14 @@ def build_observation(state: State, world: World, config: CrowdNavConfig) -> Cro
         edges = np.take_along_axis(rel, order[:, :, None], axis=1)
         spatial[:, :k] = np.where(seen_k[:, :, None], edges, 0.0)
         mask[:, :k] = seen_k
-    return CrowdNavObs(
-        robot.astype(np.float32), state.command.astype(np.float32), spatial, mask
-    )
+    return CrowdNavObs(robot.astype(np.float32), state.command.astype(np.float32), spatial, mask)
 
 
 def command_from_action(
-    action: NDArray[np.floating], v_prev: NDArray[np.floating], robot: RobotConfig, dt: float,
+    action: NDArray[np.floating],
+    v_prev: NDArray[np.floating],
+    robot: RobotConfig,
+    dt: float,
     config: CrowdNavConfig,
 ) -> NDArray[np.float64]:
     """Absolute commands ``(B, 2)`` (v [m/s], ω [rad/s]) from raw actions ``(B, 2)``.
@@ -241,9 +244,7 @@ class CrowdNavNet(nn.Module):
         e, h, f = cfg.embed, cfg.hidden, cfg.head_hidden
         self.robot_embed = _linear(ROBOT_DIM + TEMPORAL_DIM, e, gen)
         self.spatial_embed = _linear(cfg.spatial_dim, e, gen)
-        self.hh_q = _linear(e, e, gen)
-        self.hh_k = _linear(e, e, gen)
-        self.hh_v = _linear(e, e, gen)
+        self.hh_qkv = _linear(e, 3 * e, gen)  # W_q, W_k, W_v of the human–human attention
         self.rh_q = _linear(e, e, gen)
         self.rh_k = _linear(e, e, gen)
         self.merge = _linear(2 * e, e, gen)
@@ -275,11 +276,12 @@ class CrowdNavNet(nn.Module):
         scale = 1.0 / math.sqrt(self.config.embed)
         r = torch.relu(self.robot_embed(torch.cat([robot, temporal], dim=-1)))
         s = torch.relu(self.spatial_embed(spatial))
-        a_hh = _masked_softmax(
-            self.hh_q(s) @ self.hh_k(s).transpose(-1, -2) * scale, mask.unsqueeze(-2)
+        q, k, v = self.hh_qkv(s).chunk(3, dim=-1)
+        a_hh = _masked_softmax(q @ k.transpose(-1, -2) * scale, mask.unsqueeze(-2))
+        hum = torch.relu(s + a_hh @ v) * mask.unsqueeze(-1)
+        a_rh = _masked_softmax(
+            (self.rh_k(hum) @ self.rh_q(r).unsqueeze(-1)).squeeze(-1) * scale, mask
         )
-        hum = torch.relu(s + a_hh @ self.hh_v(s)) * mask.unsqueeze(-1)
-        a_rh = _masked_softmax((self.rh_k(hum) @ self.rh_q(r).unsqueeze(-1)).squeeze(-1) * scale, mask)
         c = (a_rh.unsqueeze(-1) * hum).sum(dim=-2)
         x = torch.relu(self.merge(torch.cat([r, c], dim=-1)))
         return x.reshape(*lead, -1), a_rh.reshape(*lead, n), a_hh.reshape(*lead, n, n)
@@ -377,7 +379,9 @@ def load_crowdnav(path: str | Path) -> CrowdNavNet:
     received = {k: tuple(v.shape) for k, v in arrays.items()}
     if expected != received or any(not bool(torch.isfinite(v).all()) for v in arrays.values()):
         raise DataError(
-            expect(f"{p}: tensors", "finite tensors matching the stored config", "mismatch", "re-train")
+            expect(
+                f"{p}: tensors", "finite tensors matching the stored config", "mismatch", "re-train"
+            )
         )
     model.load_state_dict(arrays, strict=True)
     return model.eval()
@@ -387,7 +391,9 @@ def shipped_weights(scenario: str) -> Path:
     """Path of the shipped weights for ``scenario`` (``data/baselines/crowdnav-{scenario}``)."""
     p = BASELINES_DIR / f"crowdnav-{scenario}.safetensors"
     if not p.is_file():
-        names = sorted(q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors"))
+        names = sorted(
+            q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors")
+        )
         raise DataError(
             expect(
                 "CrowdNav++ shipped weights",

@@ -131,7 +131,8 @@ def _teacher(scenario: str, reward: str) -> Any:
 
 
 def _student(checkpoint: str) -> Any:
-    key = ("student", checkpoint)
+    st = os.stat(checkpoint)  # a rewritten file (a recreated run folder) is a new student
+    key = ("student", f"{checkpoint}:{st.st_mtime_ns}:{st.st_size}")
     if key not in _CACHE:
         from pioneer.learn.policy import make_student_policy
 
@@ -330,7 +331,10 @@ def run_dagger(
 
         default_reward(cfg.scenario).save(reward_path)
     n_workers = workers or os.cpu_count() or 1
-    torch.set_num_threads(max(1, n_workers))
+    # Train on one thread: float32 sums depend on the thread count, and the weights must not
+    # depend on --workers or the machine (the networks are small; threads gain little).
+    torch.set_num_threads(1)
+    _CACHE.clear()
     total = cfg.teacher_episodes + cfg.rounds * cfg.episodes_per_round
     done = sum(
         _episode_path(out, r, i).exists()

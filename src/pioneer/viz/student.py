@@ -27,15 +27,17 @@ def plot_dagger_curves(rows: Sequence[Mapping[str, Any]], path: str | os.PathLik
     if np.isfinite(new).any():
         ax1.plot(rnd, new, "s--", label="loss on the round's new frames")
     ax1.set_xlabel("DAgger round")
-    ax1.set_ylabel("loss (NLL for the MDN, std. MSE for the MLP)")
+    ax1.set_ylabel("loss (MDN: NLL, MLP: std. MSE)")
+    ax1.set_xticks(rnd)
     ax1.legend(fontsize=7)
     ax1.grid(alpha=0.3)
     sr = 100.0 * np.array([float(r["success_rate"]) for r in rows])
     colours = ["tab:gray" if r["driver"] == "teacher" else "tab:blue" for r in rows]
     ax2.bar(rnd, sr, color=colours)
     ax2.set_ylim(0, 105)
-    ax2.set_xlabel("DAgger round (0: teacher drives)")
-    ax2.set_ylabel("success rate of the round's episodes [%]")
+    ax2.set_xlabel("round (0: teacher drives; r: the student of round r − 1)")
+    ax2.set_ylabel("success of the round's episodes [%]")
+    ax2.set_xticks(rnd)
     ax2.grid(alpha=0.3, axis="y")
     fig.tight_layout()
     with atomic_path(path) as tmp:

@@ -1,0 +1,322 @@
+"""CrowdNav++ baseline: graph observation, attention and masking, increments → commands, PPO's
+GAE against a brute-force oracle, the reward terms, checkpoints, determinism, the shipped
+weights in the spawned-process harness, and the training command end to end with resume."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from pioneer.cli import main
+from pioneer.control.policy import build_policy
+from pioneer.errors import ConfigError, DataError
+from pioneer.eval.episode import run_episode
+from pioneer.eval.harness import PolicySpec, evaluate
+from pioneer.learn.crowdnav import (
+    CrowdNavConfig,
+    CrowdNavNet,
+    CrowdNavPolicy,
+    build_observation,
+    command_from_action,
+    load_crowdnav,
+    read_crowdnav_meta,
+    save_crowdnav,
+    shipped_weights,
+)
+from pioneer.learn.ppo import PPOConfig, RewardConfig, compute_gae, crowdnav_reward
+from pioneer.sim.humans import GONE
+from pioneer.sim.robot import RobotConfig
+from pioneer.sim.world import step
+from pioneer_testutils import assert_house_message, make_state, open_world
+
+torch.set_num_threads(1)
+
+
+def random_graph(seed: int, b: int = 4, n: int = 5, cfg: CrowdNavConfig | None = None):
+    cfg = cfg or CrowdNavConfig(max_humans=n)
+    g = torch.Generator().manual_seed(seed)
+    robot = torch.randn(b, 8, generator=g)
+    temporal = torch.randn(b, 2, generator=g)
+    spatial = torch.randn(b, n, cfg.spatial_dim, generator=g) * 2.0
+    mask = torch.rand(b, n, generator=g) < 0.6
+    mask[0] = False  # nobody present
+    mask[1] = True  # everybody present
+    return robot, temporal, spatial, mask
+
+
+# ------------------------------------------------------------------------- network
+def test_attention_shapes_and_weights():
+    net = CrowdNavNet(CrowdNavConfig(max_humans=5), seed=3)
+    robot, temporal, spatial, mask = random_graph(0)
+    x, a_rh, a_hh = net.encode(robot, temporal, spatial, mask)
+    assert x.shape == (4, 64)
+    assert a_rh.shape == (4, 5)
+    assert a_hh.shape == (4, 5, 5)
+    for b in range(4):
+        m = mask[b]
+        assert torch.all(a_rh[b][~m] == 0)
+        assert torch.all(a_hh[b][:, ~m] == 0)
+        if m.any():
+            assert float(a_rh[b][m].sum().detach()) == pytest.approx(1.0, abs=1e-6)
+            assert torch.allclose(a_hh[b].sum(-1), torch.ones(5), atol=1e-6)
+        else:
+            assert torch.all(a_rh[b] == 0)
+    assert torch.isfinite(x).all()
+    # Leading batch dimensions are kept (the PPO update encodes (T, B, …) at once).
+    x2, a2, h2 = net.encode(
+        *(t.reshape(2, 2, *t.shape[1:]) for t in (robot, temporal, spatial, mask))
+    )
+    assert x2.shape == (2, 2, 64) and a2.shape == (2, 2, 5) and h2.shape == (2, 2, 5, 5)
+    assert torch.allclose(x2.reshape(4, 64), x, atol=1e-6)
+
+
+def test_output_invariant_to_padded_entries():
+    net = CrowdNavNet(CrowdNavConfig(max_humans=5), seed=4)
+    robot, temporal, spatial, mask = random_graph(1)
+    h = torch.randn(4, 64, generator=torch.Generator().manual_seed(9))
+    mean, value, h1 = net(robot, temporal, spatial, mask, h)
+    junk = spatial.clone()
+    junk[~mask] = torch.randn(int((~mask).sum()), spatial.shape[-1]) * 100.0
+    mean2, value2, h2 = net(robot, temporal, junk, mask, h)
+    assert torch.equal(mean, mean2) and torch.equal(value, value2) and torch.equal(h1, h2)
+    # The gradients stay finite with nobody present (masked softmax of an all-masked row).
+    net.train()
+    m, v, _ = net(robot, temporal, spatial, mask, h)
+    (m.sum() + v.sum()).backward()
+    assert all(torch.isfinite(p.grad).all() for p in net.parameters() if p.grad is not None)
+
+
+# ------------------------------------------------------------------------- observation
+def test_observation_sorted_masked_and_predicted():
+    world = open_world()
+    humans = [
+        {"pos": (3.0, 0.0), "vel": (0.0, 0.4)},
+        {"pos": (0.0, 1.5), "vel": (-0.2, 0.0)},
+        {"pos": (-1.0, 0.0), "status": GONE},
+        {"pos": (9.0, 0.0)},  # beyond the 5 m sensor range
+    ]
+    s = make_state((1.0, 0.0, 0.5), goal=(4.0, 4.0), humans=humans)
+    s.command[:] = (0.3, -0.2)
+    cfg = CrowdNavConfig(max_humans=4)
+    o = build_observation(s, world, cfg)
+    assert o.robot.shape == (1, 8) and o.spatial.shape == (1, 4, 12) and o.mask.shape == (1, 4)
+    np.testing.assert_allclose(
+        o.robot[0], [1.0, 0.0, 0.3, 3.0, 4.0, 0.8, math.cos(0.5), math.sin(0.5)], rtol=1e-6
+    )
+    np.testing.assert_allclose(o.temporal[0], [0.3, -0.2])
+    assert o.mask[0].tolist() == [True, True, False, False]
+    # Nearest first: human 1 at 1.80 m, then human 0 at 2 m; K = 5 CV predictions at 0.25 s.
+    k = np.arange(6) * 0.25
+    want1 = np.stack([-1.0 - 0.2 * k, 1.5 + 0 * k], -1).ravel()
+    want0 = np.stack([2.0 + 0 * k, 0.4 * k], -1).ravel()
+    np.testing.assert_allclose(o.spatial[0, 0], want1, atol=1e-6)
+    np.testing.assert_allclose(o.spatial[0, 1], want0, atol=1e-6)
+    assert np.all(o.spatial[0, 2:] == 0)
+    # Fewer slots than present humans: the nearest are kept.
+    o2 = build_observation(s, world, CrowdNavConfig(max_humans=1))
+    np.testing.assert_allclose(o2.spatial[0, 0], want1, atol=1e-6)
+
+
+def test_command_from_action_integrates_increments():
+    robot = RobotConfig()
+    cfg = CrowdNavConfig()
+    v_prev = np.array([0.0, 0.5, 0.78, 0.3])
+    a = np.array([[1.0, 1.0], [-1.0, -1.0], [5.0, 0.5], [0.0, 0.0]])
+    u = command_from_action(a, v_prev, robot, 0.1, cfg)
+    np.testing.assert_allclose(u[:, 0], [0.087, 0.4, 0.8, 0.3])  # clipped to v_max
+    np.testing.assert_allclose(u[:, 1], [0.6, -0.6, 0.3, 0.0])  # Δθ / Δt
+    u = command_from_action(np.array([[-1.0, 0.0]]), np.array([0.05]), robot, 0.1, cfg)
+    assert u[0, 0] == 0.0  # never below v_min
+
+
+# ------------------------------------------------------------------------- PPO pieces
+def gae_oracle(r, v, d, last, gamma, lam):
+    """Brute force: A_t = Σ_l (γλ)^l δ_{t+l}, summed until the episode's last step."""
+    t_len, b = r.shape
+    vn = np.concatenate([v, last[None]], axis=0)
+    adv = np.zeros_like(r)
+    for j in range(b):
+        for t in range(t_len):
+            total, factor = 0.0, 1.0
+            for u in range(t, t_len):
+                delta = r[u, j] + gamma * vn[u + 1, j] * (1 - d[u, j]) - v[u, j]
+                total += factor * delta
+                if d[u, j]:
+                    break
+                factor *= gamma * lam
+            adv[t, j] = total
+    return adv
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gae_matches_bruteforce(seed):
+    rng = np.random.default_rng(seed)
+    t_len, b = int(rng.integers(1, 12)), int(rng.integers(1, 4))
+    r, v = rng.normal(size=(t_len, b)), rng.normal(size=(t_len, b))
+    d = (rng.random((t_len, b)) < 0.25).astype(float)
+    last = rng.normal(size=b)
+    gamma, lam = float(rng.uniform(0.8, 1.0)), float(rng.uniform(0.0, 1.0))
+    adv, ret = compute_gae(r, v, d, last, gamma, lam)
+    np.testing.assert_allclose(adv, gae_oracle(r, v, d, last, gamma, lam), atol=1e-10)
+    np.testing.assert_allclose(ret, adv + v)
+    # λ = 1: the return is the discounted sum up to the episode end (or the bootstrap).
+    _, ret1 = compute_gae(r, v, d, last, gamma, 1.0)
+    for j in range(b):
+        for t in range(t_len):
+            g, f = 0.0, 1.0
+            for u in range(t, t_len):
+                g += f * r[u, j]
+                f *= gamma
+                if d[u, j]:
+                    break
+            else:
+                g += f * last[j]
+            assert ret1[t, j] == pytest.approx(g, abs=1e-9)
+
+
+def test_reward_terms():
+    world = open_world()
+    rc = RewardConfig()
+    # Potential only: nobody near, goal straight ahead; 3 × (decrease of goal distance).
+    s0 = make_state((0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (0.0, 10.0)}])
+    s1 = step(world, s0, [0.5, 0.0])
+    r, ev = crowdnav_reward(world, s0, s1, rc)
+    assert ev[0] == 0
+    assert r[0] == pytest.approx(3.0 * 0.05, abs=1e-9)
+    # Intrusion: a human walking into the robot's place in 0.5 s (k = 2) but not at 0.25 s.
+    s0 = make_state(
+        (0.0, 0.0, 0.0),
+        goal=(5.0, 0.0),
+        humans=[{"pos": (2.0, 0.0), "vel": (-2.4, 0.0), "goal": (-5.0, 0.0)}],
+    )
+    s1 = step(world, s0, [0.0, 0.0])
+    s1.h_pos[:] = (2.15, 0.0)
+    s1.h_vel[:] = (-2.4, 0.0)
+    s1.clearance[:] = 1.25
+    r, _ = crowdnav_reward(world, s1, s1, rc)
+    # k = 1: 2.15 − 0.6 = 1.55 m (clear); k = 2: 0.95 m (clear, > 0.9); k = 3: 0.35 m (hit).
+    assert r[0] == pytest.approx(-20.0 / 2**4)
+    # Discomfort replaces the potential; spin on the heading change of the step.
+    s1.clearance[:] = 0.05
+    s1.h_pos[:] = (9.0, 9.0)
+    s1.command[:] = (0.0, 0.5)
+    r, _ = crowdnav_reward(world, s1, s1, rc)
+    assert r[0] == pytest.approx((0.05 - 0.25) * 10 * 0.1 - 4.5 * 0.05**2)
+    # Collision and success end the episode with their constants.
+    s0 = make_state((0.0, 0.0, 0.0), goal=(0.2, 0.0), humans=[{"pos": (0.0, 10.0)}])
+    s1 = step(world, s0, [0.3, 0.0])
+    r, ev = crowdnav_reward(world, s0, s1, rc)
+    assert ev[0] == 1 and r[0] == pytest.approx(10.0)
+    s0 = make_state((0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (0.95, 0.0)}])
+    s1 = step(world, s0, [0.8, 0.0])
+    r, ev = crowdnav_reward(world, s0, s1, rc)
+    assert ev[0] == 2 and r[0] == pytest.approx(-20.0)
+
+
+def test_ppo_config_errors():
+    with pytest.raises(ConfigError) as e:
+        PPOConfig(minibatches=4, n_envs=2)
+    assert_house_message(str(e.value), "minibatches")
+    with pytest.raises(ConfigError):
+        PPOConfig(total_steps=0)
+    with pytest.raises(ConfigError):
+        CrowdNavConfig(dv_range=(0.1, 0.2))
+
+
+# ------------------------------------------------------------------------- checkpoints, policy
+def test_checkpoint_round_trip_and_errors(tmp_path):
+    net = CrowdNavNet(CrowdNavConfig(max_humans=3, embed=16, hidden=8), seed=5)
+    p = save_crowdnav(net, tmp_path / "w.safetensors", {"scenario": "hr-rl"})
+    back = load_crowdnav(p)
+    assert back.config == net.config
+    for k, v in net.state_dict().items():
+        assert torch.equal(back.state_dict()[k], v)
+    assert read_crowdnav_meta(p)["info"] == {"scenario": "hr-rl"}
+    bad = tmp_path / "bad.safetensors"
+    bad.write_bytes(p.read_bytes()[:100])
+    with pytest.raises(DataError) as e:
+        load_crowdnav(bad)
+    assert_house_message(str(e.value))
+    with pytest.raises(DataError):
+        shipped_weights("static")
+
+
+def test_policy_is_deterministic_and_registered():
+    pol = CrowdNavPolicy(CrowdNavNet(CrowdNavConfig(max_humans=3), seed=6))
+    a, _ = run_episode("hr-rl", pol, seed=11)
+    b, _ = run_episode("hr-rl", pol, seed=11)
+    assert a == b
+    shipped = build_policy("crowdnav++", "hr-rl")
+    assert shipped.name == "crowdnav++"
+
+
+def test_shipped_weights_in_spawned_harness(tmp_path):
+    for sc in ("hr-rl", "hl-rr"):
+        assert read_crowdnav_meta(shipped_weights(sc))["info"]["scenario"] == sc
+    recs = evaluate(
+        ["hr-rl"], [PolicySpec.make("crowdnav++")], 1, 2, tmp_path, workers=2, progress=False
+    )
+    assert len(recs) == 2
+    assert {r["policy"] for r in recs} == {"crowdnav++"}
+    assert all(r["event"] in {"success", "collision", "timeout"} for r in recs)
+    assert all(r["path_length_m"] > 0.1 for r in recs)  # a trained policy drives
+
+
+# ------------------------------------------------------------------------- the CLI
+def _train(out, steps, *extra):
+    argv = ["train", "crowdnav++", "--scenario", "hr-rl", "--out", str(out), "--steps", str(steps)]
+    return main([*argv, "--envs", "2", "--checkpoint-every", "1", *extra])
+
+
+def _curve(out):
+    with open(out / "curve.csv") as fh:
+        return [{k: v for k, v in row.items() if k != "wall_time_s"} for row in csv.DictReader(fh)]
+
+
+def test_train_cli_end_to_end_and_resume(tmp_path, capsys):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert _train(a, 120) == 0  # 2 updates of 2 envs × 30 steps
+    assert (a / "curve.png").is_file() and (a / "checkpoint.safetensors").is_file()
+    assert [r["update"] for r in _curve(a)] == ["1", "2"]
+    assert _train(a, 240, "--resume") == 0  # continues at update 3
+    info = json.loads((a / "train.json").read_text())
+    assert info["resumed_from_update"] == 2 and info["updates"] == 4 and info["env_steps"] == 240
+    assert _train(b, 240) == 0  # the same run, uninterrupted
+    assert _curve(a) == _curve(b)
+    wa, wb = load_crowdnav(a / "policy.safetensors"), load_crowdnav(b / "policy.safetensors")
+    for k, v in wa.state_dict().items():
+        assert torch.equal(v, wb.state_dict()[k]), k
+    assert _train(a, 240) == 0  # finished: a rerun changes nothing
+    assert json.loads((a / "train.json").read_text())["updates"] == 4
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--steps", "0"], "total_steps"),
+        (["--scenario", "nope"], "scenario"),
+        (["--envs", "1"], "minibatches"),
+        (["--resume"], "--resume"),
+        (["--lr", "-1"], "lr"),
+    ],
+)
+def test_train_cli_bad_input(tmp_path, capsys, extra, needle):
+    argv = ["train", "crowdnav++", "--out", str(tmp_path / "x"), "--steps", "60", "--envs", "2"]
+    assert main([*argv, *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pioneer: error:")
+    assert needle in err[0]
+
+
+def test_train_cli_refuses_other_settings_on_resume(tmp_path, capsys):
+    assert _train(tmp_path, 60) == 0
+    capsys.readouterr()
+    assert _train(tmp_path, 120, "--lr", "1e-3") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ppo.lr" in err[0]

@@ -1,0 +1,531 @@
+"""DAgger (``pioneer.learn.dagger``) and ``pioneer distill``: outputs, labels, seeds,
+determinism across runs and worker counts, resume, refused reruns, bad settings.
+
+The runs use a test-only scenario, ``tiny-static``: the static study truncated after 0.8 s
+(8 decisions an episode), so a whole DAgger run takes a few seconds. Spawned collection
+workers learn it through the pool initializer (see ``_tiny_worker_init``).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+import pioneer.control.teacher as teacher_mod
+import pioneer.learn.dagger as dagger
+from pioneer.cli import main
+from pioneer.control.teacher import make_teacher
+from pioneer.errors import ConfigError, DataError, ScenarioError
+from pioneer.eval.harness import episode_seed
+from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
+from pioneer.learn.dagger import DaggerConfig, DaggerResult, dagger_seed, run_dagger
+from pioneer.sim import scenarios
+from pioneer.sim.env import NavEnv
+from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
+from pioneer.sim.world import SimConfig
+from pioneer_testutils import assert_house_message
+
+torch.set_num_threads(1)
+
+TINY = "tiny-static"
+TIME_LIMIT = 0.8  # [s] episode length of the tiny scenario
+TINY_CFG = DaggerConfig(
+    scenario=TINY,
+    teacher_episodes=2,
+    rounds=2,
+    episodes_per_round=2,
+    epochs_initial=2,
+    epochs_per_round=1,
+)
+EPISODE_KEYS = {
+    "obs",
+    "action",
+    "applied",
+    "clearance",
+    "aleatoric",
+    "epistemic",
+    "event",
+    "time_s",
+    "env_seed",
+}
+
+
+def _tiny_scenario() -> ScenarioConfig:
+    return dataclasses.replace(
+        static_study_scenario(sim=SimConfig(time_limit=TIME_LIMIT)), name=TINY
+    )
+
+
+_REAL_WORKER_INIT = dagger._worker_init
+
+
+def _tiny_worker_init() -> None:
+    """Pool initializer: spawned workers import this module (the parent's ``sys.path`` is
+    passed on), register the tiny scenario, then run the real initializer."""
+    scenarios._REGISTRY.setdefault(TINY, _tiny_scenario)
+    _REAL_WORKER_INIT()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def tiny_scenario() -> Iterator[str]:
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(scenarios._REGISTRY, TINY, _tiny_scenario)
+        mp.setattr(dagger, "_worker_init", _tiny_worker_init)
+        yield TINY
+
+
+@pytest.fixture(scope="module")
+def reward_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The static study's density reward, fitted once (the tiny scenario has no demos)."""
+    path = tmp_path_factory.mktemp("reward") / "static.npz"
+    teacher_mod.default_reward("static").save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def run_mdn(tmp_path_factory: pytest.TempPathFactory) -> tuple[DaggerResult, list[dict[str, Any]]]:
+    """The reference run (workers=1, default reward → ``DIR/reward.npz``) and its callbacks."""
+    out = tmp_path_factory.mktemp("dagger") / "mdn"
+    rows: list[dict[str, Any]] = []
+    real = teacher_mod.default_reward
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(teacher_mod, "default_reward", lambda scenario: real("static"))
+        res = run_dagger(TINY_CFG, out, workers=1, progress=False, on_round=rows.append)
+    return res, rows
+
+
+def _load(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as f:
+        return {k: f[k] for k in f.files}
+
+
+def _episodes(out: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every episode file of a run, by path relative to the run folder."""
+    return {
+        str(p.relative_to(out)): _load(p) for p in sorted((out / "rounds").glob("round-*/ep-*.npz"))
+    }
+
+
+def _same_rows(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> bool:
+    """Equal curve rows (NaN equal to NaN)."""
+    return len(a) == len(b) and all(
+        ra.keys() == rb.keys()
+        and all(
+            x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y))
+            for x, y in zip(ra.values(), rb.values(), strict=True)
+        )
+        for ra, rb in zip(a, b, strict=True)
+    )
+
+
+def _assert_same_episodes(a: Path, b: Path) -> None:
+    ea, eb = _episodes(a), _episodes(b)
+    assert sorted(ea) == sorted(eb)
+    for name, ep in ea.items():
+        assert set(ep) == set(eb[name]), name
+        for key, arr in ep.items():
+            np.testing.assert_array_equal(arr, eb[name][key], err_msg=f"{name}:{key}")
+
+
+def _assert_same_weights(a: Path, b: Path) -> None:
+    sa, sb = load_student(a).state_dict(), load_student(b).state_dict()
+    assert list(sa) == list(sb)
+    for key, value in sa.items():
+        assert torch.equal(value, sb[key]), key
+
+
+def _snapshot(out: Path, rounds: range) -> dict[str, tuple[int, bytes]]:
+    """mtime and content of every file of the given rounds."""
+    return {
+        str(p.relative_to(out)): (p.stat().st_mtime_ns, p.read_bytes())
+        for r in rounds
+        for p in sorted((out / "rounds" / f"round-{r:02d}").iterdir())
+    }
+
+
+@pytest.fixture
+def collected(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Paths of the episodes collected from now on (in-process collection, workers=1)."""
+    seen: list[str] = []
+    real = dagger._collect_task
+
+    def spy(args: tuple[str, str, str | None, int, str]) -> str:
+        seen.append(str(Path(args[4]).relative_to(Path(args[4]).parents[1])))
+        return real(args)
+
+    monkeypatch.setattr(dagger, "_collect_task", spy)
+    return seen
+
+
+def _distill_argv(out: Path, *extra: str, rounds: int = 2) -> list[str]:
+    return [
+        "distill",
+        "--scenario",
+        TINY,
+        "--out",
+        str(out),
+        "--teacher-episodes",
+        "2",
+        "--rounds",
+        str(rounds),
+        "--episodes-per-round",
+        "2",
+        "--epochs-initial",
+        "2",
+        "--epochs-per-round",
+        "1",
+        "--workers",
+        "1",
+        *extra,
+    ]
+
+
+# ------------------------------------------------------------------------------ outputs
+def test_run_writes_every_output(run_mdn):
+    res, _ = run_mdn
+    out = res.out
+    assert res.student == out / "student.safetensors"
+    for name in ("config.json", "reward.npz", "curves.csv", "curves.png", "student.safetensors"):
+        assert (out / name).is_file(), name
+    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+    assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in (out / "rounds").iterdir()) == [
+        "round-00",
+        "round-01",
+        "round-02",
+    ]
+    for rnd in range(3):
+        rdir = out / "rounds" / f"round-{rnd:02d}"
+        assert sorted(p.name for p in rdir.iterdir()) == [
+            "ep-000.npz",
+            "ep-001.npz",
+            "student.safetensors",
+        ]
+    assert not list(out.rglob(".*"))  # no temporary file left behind
+    # The final student is the last round's.
+    assert res.student.read_bytes() == (out / "rounds/round-02/student.safetensors").read_bytes()
+
+
+def test_curves_have_one_row_per_round(run_mdn):
+    res, rows = run_mdn
+    assert rows == res.curves
+    assert [r["round"] for r in res.curves] == [0, 1, 2]
+    assert [r["driver"] for r in res.curves] == ["teacher", "student", "student"]
+    assert [r["episodes"] for r in res.curves] == [2, 2, 2]
+    frames = [r["frames_total"] for r in res.curves]
+    assert frames[0] > 0 and frames[0] < frames[1] < frames[2]
+    assert frames[-1] == sum(len(ep["obs"]) for ep in _episodes(res.out).values())
+    assert math.isnan(res.curves[0]["loss_new_data"])
+    assert all(math.isfinite(r["loss_new_data"]) for r in res.curves[1:])
+    assert all(math.isfinite(r["train_loss"]) for r in res.curves)
+    for r in res.curves:
+        assert 0.0 <= r["success_rate"] + r["collision_rate"] <= 1.0
+        assert 0.0 < r["mean_time_s"] <= TIME_LIMIT + 1e-9
+    with open(res.out / "curves.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert len(table) == 3
+    assert [int(t["frames_total"]) for t in table] == frames
+    assert [t["driver"] for t in table] == ["teacher", "student", "student"]
+
+
+def test_final_student_loads_with_dagger_info(run_mdn):
+    res, _ = run_mdn
+    model = load_student(res.student)
+    assert isinstance(model, MDN) and not model.training
+    info = read_checkpoint_meta(res.student)["info"]
+    assert info["source"] == "dagger"
+    assert info["scenario"] == TINY and info["round"] == 2
+    assert info["dagger"] == TINY_CFG.to_dict()
+    assert info["frames"] == res.curves[-1]["frames_total"]
+    assert len(info["loss_history"]) == TINY_CFG.epochs_per_round
+    assert info["loss_history"][-1] == pytest.approx(res.curves[-1]["train_loss"])
+    qs = info["uncertainty_quantiles"]
+    assert set(qs) == {"aleatoric", "epistemic"}
+    for name, by_q in qs.items():
+        assert list(by_q) == ["0.5", "0.9", "0.95", "0.99"], name
+        values = list(by_q.values())
+        assert all(v >= 0 and math.isfinite(v) for v in values)
+        assert values == sorted(values), name
+    first = read_checkpoint_meta(res.out / "rounds/round-00/student.safetensors")["info"]
+    assert first["round"] == 0 and len(first["loss_history"]) == TINY_CFG.epochs_initial
+
+
+def test_episode_files_hold_labelled_frames(run_mdn):
+    res, _ = run_mdn
+    eps = _episodes(res.out)
+    assert len(eps) == 6
+    for name, ep in eps.items():
+        rnd, i = int(name.split("round-")[1][:2]), int(name.split("ep-")[1][:3])
+        assert set(ep) == EPISODE_KEYS, name
+        n = len(ep["obs"])
+        assert ep["obs"].shape == (n, 29) and ep["obs"].dtype == np.float32
+        for key in ("action", "applied"):
+            assert ep[key].shape == (n, 2) and ep[key].dtype == np.float32
+            assert np.all(np.isfinite(ep[key]))
+        for key in ("clearance", "aleatoric", "epistemic"):
+            assert ep[key].shape == (n,)
+        assert str(ep["event"]) in {"success", "collision", "timeout"}
+        assert float(ep["time_s"]) == pytest.approx(0.1 * n)
+        assert int(ep["env_seed"]) == dagger_seed(TINY, 0, rnd, i)
+        if rnd == 0:  # the teacher drives: no student uncertainty
+            assert np.all(np.isnan(ep["aleatoric"])) and np.all(np.isnan(ep["epistemic"]))
+        else:
+            assert np.all(ep["aleatoric"] > 0) and np.all(ep["epistemic"] >= 0)
+
+
+# ------------------------------------------------------------------------------ labels
+def test_teacher_round_labels_are_the_applied_commands(run_mdn):
+    res, _ = run_mdn
+    for i in range(2):
+        ep = _load(res.out / f"rounds/round-00/ep-{i:03d}.npz")
+        np.testing.assert_array_equal(ep["action"], ep["applied"])
+
+
+def test_student_rounds_apply_the_previous_rounds_student(run_mdn):
+    res, _ = run_mdn
+    for rnd in (1, 2):
+        ckpt = res.out / f"rounds/round-{rnd - 1:02d}/student.safetensors"
+        pol = make_student_policy(ckpt)
+        for i in range(2):
+            ep = _load(res.out / f"rounds/round-{rnd:02d}/ep-{i:03d}.npz")
+            pol.reset({}, np.random.default_rng(0))
+            u = np.stack([pol.act(o, {}) for o in ep["obs"]])
+            np.testing.assert_allclose(ep["applied"], u, rtol=0, atol=1e-6)
+            unc = np.asarray(pol.uncertainty)
+            np.testing.assert_allclose(ep["aleatoric"], unc[:, 0], rtol=1e-6)
+            np.testing.assert_allclose(ep["epistemic"], unc[:, 1], rtol=1e-6)
+            # The labels are the teacher's, not the student's own commands.
+            assert not np.allclose(ep["action"], ep["applied"], atol=1e-3)
+
+
+def test_student_round_labels_are_the_teachers_decisions_from_the_applied_command(
+    run_mdn, reward_file
+):
+    """Replay a student episode with its applied commands: every stored frame is the state's
+    observation, and every label is the teacher's decision smoothed from ``state.command``."""
+    res, _ = run_mdn
+    ep = _load(res.out / "rounds/round-02/ep-001.npz")
+    teacher = make_teacher(TINY, reward=str(reward_file))
+    env = NavEnv(TINY)
+    obs, info = env.reset(seed=int(ep["env_seed"]))
+    teacher.reset(info, np.random.default_rng(0))
+    for t in range(len(ep["obs"])):
+        np.testing.assert_array_equal(ep["obs"][t], obs)
+        assert ep["clearance"][t] == info["min_clearance"]
+        state = info["state"]
+        label = teacher.decide(info["world"], state, prev=state.command[0]).command
+        np.testing.assert_allclose(ep["action"][t], label, rtol=0, atol=1e-6)
+        obs, _, term, trunc, info = env.step(ep["applied"][t].astype(np.float64))
+        assert (term or trunc) == (t == len(ep["obs"]) - 1)
+    assert info["event"] == str(ep["event"])
+
+
+def test_dagger_seeds_are_deterministic_and_disjoint_from_evaluation_seeds():
+    for scenario in ("hr-rl", "hl-rr", TINY):
+        train = {
+            dagger_seed(scenario, s, r, e) for s in range(3) for r in range(4) for e in range(20)
+        }
+        assert len(train) == 3 * 4 * 20  # all distinct
+        assert train == {
+            dagger_seed(scenario, s, r, e) for s in range(3) for r in range(4) for e in range(20)
+        }
+        evaluation = {episode_seed(scenario, s, t) for s in range(3) for t in range(80)}
+        assert not train & evaluation
+        assert all(0 <= x < 2**32 for x in train)
+    assert dagger_seed("hr-rl", 0, 0, 0) != dagger_seed("hl-rr", 0, 0, 0)
+    assert dagger_seed("hr-rl", 0, 1, 0) != dagger_seed("hr-rl", 0, 0, 1)
+
+
+# ------------------------------------------------------------------------------ determinism
+def test_two_workers_collect_the_same_episodes(run_mdn, reward_file, tmp_path):
+    res, _ = run_mdn
+    try:
+        res2 = run_dagger(TINY_CFG, tmp_path / "w2", workers=2, reward=reward_file, progress=False)
+    finally:
+        torch.set_num_threads(1)  # run_dagger sets one torch thread per worker in this process
+    ea, eb = _episodes(res.out), _episodes(res2.out)
+    assert sorted(ea) == sorted(eb)
+    for name, ep in ea.items():
+        other = eb[name]
+        for key in ("event", "env_seed", "time_s"):
+            assert ep[key] == other[key], name
+        if name.startswith("rounds/round-00"):  # the teacher drives: bit for bit
+            for key, arr in ep.items():
+                np.testing.assert_array_equal(arr, other[key], err_msg=f"{name}:{key}")
+        for key in ("obs", "action", "applied", "clearance", "aleatoric", "epistemic"):
+            np.testing.assert_allclose(
+                ep[key], other[key], rtol=1e-5, atol=1e-6, err_msg=f"{name}:{key}"
+            )
+    assert [r["frames_total"] for r in res2.curves] == [r["frames_total"] for r in res.curves]
+    assert read_checkpoint_meta(res2.student)["info"]["dagger"] == TINY_CFG.to_dict()
+    # Bit for bit, student rounds and weights included: training runs on one torch thread
+    # whatever the worker count.
+    _assert_same_weights(res.student, res2.student)
+    _assert_same_episodes(res.out, res2.out)
+
+
+# ------------------------------------------------------------------------------ resume
+def test_cli_distill_repeats_the_run_and_resumes(run_mdn, reward_file, tmp_path, capsys, collected):
+    """`pioneer distill` with one round, then resumed to two rounds, then an interrupted last
+    round: every step reuses what is on disk, collects exactly what is missing, and ends with
+    the reference run's episodes and weights (same settings, another folder)."""
+    res, _ = run_mdn
+    out = tmp_path / "cli"
+    assert main(_distill_argv(out, "--reward", str(reward_file), rounds=1)) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("student: ")
+    assert str(out / "student.safetensors") in lines[0]
+    assert f"{res.curves[1]['frames_total']} frames" in lines[0]
+    assert collected == [f"round-{r:02d}/ep-{i:03d}.npz" for r in (0, 1) for i in (0, 1)]
+    assert not (out / "reward.npz").exists()  # the given reward is used, not refitted
+    assert json.loads((out / "config.json").read_text())["rounds"] == 1
+    for rnd in (0, 1):
+        ckpt = f"rounds/round-{rnd:02d}/student.safetensors"
+        _assert_same_weights(res.out / ckpt, out / ckpt)
+    _assert_same_weights(
+        out / "student.safetensors", res.out / "rounds/round-01/student.safetensors"
+    )
+    before = _snapshot(out, range(2))
+
+    # More rounds: rounds 0 and 1 are reused untouched, round 2 is added.
+    collected.clear()
+    two = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert collected == ["round-02/ep-000.npz", "round-02/ep-001.npz"]
+    assert _snapshot(out, range(2)) == before
+    assert _same_rows(two.curves, res.curves)
+    assert json.loads((out / "config.json").read_text())["rounds"] == 2
+    _assert_same_episodes(res.out, out)
+    _assert_same_weights(res.student, two.student)
+
+    # Nothing missing: nothing collected, nothing retrained.
+    collected.clear()
+    all_before = _snapshot(out, range(3))
+    run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert collected == []
+    assert _snapshot(out, range(3)) == all_before
+
+    # An interrupted last round: exactly the missing episode is collected again, and the
+    # student retrained to the weights of the uninterrupted run.
+    (out / "rounds/round-02/ep-001.npz").unlink()
+    (out / "rounds/round-02/student.safetensors").unlink()
+    (out / "student.safetensors").unlink()
+    kept = _snapshot(out, range(3))
+    collected.clear()
+    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert collected == ["round-02/ep-001.npz"]
+    after = _snapshot(out, range(3))
+    assert {k: after[k] for k in kept} == kept
+    _assert_same_episodes(res.out, out)
+    _assert_same_weights(res.student, again.student)
+    _assert_same_weights(res.student, out / "rounds/round-02/student.safetensors")
+
+
+def test_a_recreated_run_folder_drives_with_its_own_students(tmp_path, reward_file):
+    cfg = TINY_CFG.replace(teacher_episodes=1, rounds=1, episodes_per_round=1)
+    out = tmp_path / "again"
+    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    shutil.rmtree(out)
+    run_dagger(cfg.replace(seed=1), out, workers=1, reward=reward_file, progress=False)
+    ep = _load(out / "rounds/round-01/ep-000.npz")
+    pol = make_student_policy(out / "rounds/round-00/student.safetensors")
+    u = np.stack([pol.act(o, {}) for o in ep["obs"]])
+    np.testing.assert_allclose(ep["applied"], u, rtol=0, atol=1e-6)
+
+
+def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
+    out = tmp_path / "corrupt"
+    cfg = TINY_CFG.replace(rounds=0, teacher_episodes=1)
+    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    (out / "rounds/round-00/ep-000.npz").write_bytes(b"not an npz file")
+    with pytest.raises(DataError) as err:
+        run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert_house_message(str(err.value), "ep-000.npz", "delete that file")
+
+
+@pytest.mark.parametrize(
+    ("changes", "needle"), [({"student": "mlp"}, "student"), ({"seed": 1}, "seed")]
+)
+def test_rerun_with_other_settings_is_refused(run_mdn, reward_file, changes, needle):
+    res, _ = run_mdn
+    config_before = (res.out / "config.json").read_bytes()
+    with pytest.raises(ConfigError) as err:
+        run_dagger(TINY_CFG.replace(**changes), res.out, workers=1, reward=reward_file)
+    assert_house_message(str(err.value), needle, "--out")
+    assert (res.out / "config.json").read_bytes() == config_before
+
+
+@pytest.mark.parametrize("extra", [["--student", "mlp"], ["--seed", "3"]])
+def test_cli_rerun_with_other_settings_is_one_line_and_exit_2(run_mdn, reward_file, capsys, extra):
+    res, _ = run_mdn
+    config_before = (res.out / "config.json").read_bytes()
+    assert main(_distill_argv(res.out, "--reward", str(reward_file), *extra)) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip("\n").splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pioneer: error:"), captured.err
+    assert extra[0].removeprefix("--") in lines[0]
+    assert captured.out == ""
+    assert (res.out / "config.json").read_bytes() == config_before
+
+
+# ------------------------------------------------------------------------------ MLP student
+def test_mlp_student_run(tmp_path, reward_file):
+    cfg = TINY_CFG.replace(student="mlp", teacher_episodes=1, rounds=1, episodes_per_round=1)
+    res = run_dagger(cfg, tmp_path / "mlp", workers=1, reward=reward_file, progress=False)
+    model = load_student(res.student)
+    assert isinstance(model, MLPStudent)
+    info = read_checkpoint_meta(res.student)["info"]
+    assert info["source"] == "dagger" and info["uncertainty_quantiles"] == {}
+    assert [r["driver"] for r in res.curves] == ["teacher", "student"]
+    ep = _load(tmp_path / "mlp/rounds/round-01/ep-000.npz")
+    assert np.all(np.isnan(ep["aleatoric"])) and np.all(np.isnan(ep["epistemic"]))
+    pol = make_student_policy(tmp_path / "mlp/rounds/round-00/student.safetensors", kind="mlp")
+    u = np.stack([pol.act(o, {}) for o in ep["obs"]])
+    np.testing.assert_allclose(ep["applied"], u, rtol=0, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------ bad settings
+@pytest.mark.parametrize(
+    ("changes", "needle"),
+    [
+        ({"rounds": -1}, "rounds"),
+        ({"student": "cnn"}, "student"),
+        ({"teacher_episodes": 0}, "teacher_episodes"),
+        ({"episodes_per_round": 0}, "episodes_per_round"),
+        ({"epochs_initial": 0}, "epochs_initial"),
+        ({"epochs_per_round": -1}, "epochs_per_round"),
+        ({"batch": 0}, "batch"),
+        ({"seed": -1}, "seed"),
+        ({"rounds": 1.5}, "rounds"),
+        ({"lr": 0.0}, "lr"),
+        ({"lr": math.nan}, "lr"),
+    ],
+)
+def test_bad_config_values_are_refused(changes, needle):
+    with pytest.raises(ConfigError) as err:
+        DaggerConfig(**changes)
+    assert_house_message(str(err.value), needle)
+
+
+def test_config_round_trips_and_rejects_unknown_keys():
+    assert DaggerConfig.from_dict(TINY_CFG.to_dict()) == TINY_CFG
+    assert DaggerConfig().episodes_in(0) == 50 and TINY_CFG.episodes_in(1) == 2
+    with pytest.raises(ConfigError) as err:
+        DaggerConfig.from_dict({"round": 3})
+    assert_house_message(str(err.value), "round")
+
+
+def test_unknown_scenario_fails_before_writing_anything(tmp_path):
+    with pytest.raises(ScenarioError) as err:
+        run_dagger(DaggerConfig(scenario="nope"), tmp_path / "x", workers=1, progress=False)
+    assert_house_message(str(err.value), "nope")
+    assert not (tmp_path / "x").exists()
