@@ -323,7 +323,12 @@ def _parser() -> argparse.ArgumentParser:
     e.set_defaults(func=_cmd_eval)
 
     rp = sub.add_parser("reproduce", help="the paper's tables and figures (the main job)")
-    rp.add_argument("--profile", choices=["quick", "paper"], default="quick")
+    rp.add_argument(
+        "--profile",
+        choices=["smoke", "quick", "paper"],
+        default="quick",
+        help="smoke: 1 episode per row (a pipeline check); quick: 2 × 10; paper: 5 × 100",
+    )
     rp.add_argument("--out", default="out/reproduce")
     rp.add_argument("--workers", type=int, help="processes (default: all cores)")
     rp.set_defaults(func=_cmd_reproduce)

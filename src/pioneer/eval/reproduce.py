@@ -38,7 +38,11 @@ class Profile:
     trials: int
 
 
-PROFILES = {"quick": Profile(seeds=2, trials=10), "paper": Profile(seeds=5, trials=100)}
+PROFILES = {
+    "smoke": Profile(seeds=1, trials=1),  # the whole pipeline in a minute (tests, CI)
+    "quick": Profile(seeds=2, trials=10),
+    "paper": Profile(seeds=5, trials=100),
+}
 SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
@@ -69,7 +73,7 @@ def reproduce(
     """Run the whole pipeline; returns a small summary (paths and headline numbers)."""
     if profile not in PROFILES:
         raise ConfigError(
-            expect("profile", f"one of {sorted(PROFILES)}", profile, "use quick or paper")
+            expect("profile", f"one of {sorted(PROFILES)}", profile, "use smoke, quick or paper")
         )
     prof = PROFILES[profile]
     out = Path(out_dir)

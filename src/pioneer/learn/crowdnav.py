@@ -111,7 +111,7 @@ F32 = NDArray[np.float32]
 class CrowdNavConfig(Config):
     """Observation, network and action parameters of CrowdNav++ (defaults: see module doc)."""
 
-    max_humans: int = 5  # N_max, spatial-edge slots (nearest kept, the rest masked)
+    max_humans: int = 5  # N_max, spatial-edge slots (nearest kept); training sets the scenario's N
     n_pred: int = 5  # K, predicted positions per human
     pred_dt: float = 0.25  # [s] Δt_pred between predicted positions (the original's step)
     sensor_range: float = 5.0  # [m] humans farther from the robot's centre are masked
@@ -321,7 +321,7 @@ def save_crowdnav(
     model: CrowdNavNet, path: str | Path, info: Mapping[str, Any] | None = None
 ) -> Path:
     """Write the policy weights to ``.safetensors`` (atomically), config and ``info`` as JSON."""
-    from safetensors.torch import save_file
+    from safetensors.torch import save
 
     tensors = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     meta = {
@@ -331,8 +331,8 @@ def save_crowdnav(
         "torch": torch.__version__,
     }
     target = Path(path)
-    with atomic_path(target) as tmp:
-        save_file(tensors, str(tmp), metadata=meta)
+    with atomic_path(target) as tmp:  # bytes, not save_file: that makes the file mode 0600
+        tmp.write_bytes(save(tensors, metadata=meta))
     return target
 
 
