@@ -962,9 +962,18 @@ def bench_dagger_run(plan: Plan) -> dict[str, Any]:
         if proc.returncode != 0:
             raise RuntimeError(f"distill failed: {proc.stderr[-2000:]}")
         curves = (Path(tmp) / "dagger" / "curves.csv").read_text().splitlines()
+        digest = hashlib.sha256((Path(tmp) / "dagger" / "student.safetensors").read_bytes())
+    shipped = REPO / "src" / "pioneer" / "data" / "students" / f"{SCENARIO}-mdn.safetensors"
     return {
         "metrics": {"minutes_full_run": metric([wall / 60], "min", ("<=", 15.0))},
-        "info": {"episodes": 550, "workers": 2, "last_round": curves[-1]},
+        "info": {
+            "episodes": 550,
+            "workers": 2,
+            "last_round": curves[-1],
+            # the shipped student was made by this very command: a fresh run must match it
+            "same_weights_as_shipped": digest.hexdigest()
+            == hashlib.sha256(shipped.read_bytes()).hexdigest(),
+        },
     }
 
 

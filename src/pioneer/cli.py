@@ -274,20 +274,30 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_train_crowdnav(args: argparse.Namespace) -> int:
+    from pioneer.learn.crowdnav_bc import WarmStartConfig
     from pioneer.learn.ppo import PPOConfig, train_crowdnav
 
     ppo = PPOConfig(
         total_steps=args.steps,
         n_envs=args.envs,
         lr=args.lr,
+        entropy_coef=args.entropy_coef,
         seed=args.seed,
         checkpoint_every=args.checkpoint_every,
+    )
+    warm = WarmStartConfig(
+        bc_episodes=args.bc_episodes,
+        bc_epochs=args.bc_epochs,
+        dagger_rounds=args.dagger_rounds,
+        dagger_episodes=args.dagger_episodes,
+        critic_warmup=args.critic_warmup,
     )
     cmd = " ".join(["pioneer", *sys.argv[1:]]) if sys.argv[0].endswith("pioneer") else ""
     summary = train_crowdnav(
         args.scenario,
         args.out,
         ppo,
+        warm=warm,
         resume=True if args.resume else None,
         command=cmd,
         torch_threads=args.threads,
@@ -373,6 +383,16 @@ def _parser() -> argparse.ArgumentParser:
     tc.add_argument("--envs", type=int, default=16, help="environments stepped together")
     tc.add_argument("--seed", type=int, default=0)
     tc.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
+    tc.add_argument("--entropy-coef", type=float, default=0.01, help="PPO entropy bonus")
+    tc.add_argument(
+        "--bc-episodes", type=int, default=0, help="teacher demonstrations to imitate first (0: no)"
+    )
+    tc.add_argument("--bc-epochs", type=int, default=30, help="behaviour-cloning epochs")
+    tc.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning")
+    tc.add_argument("--dagger-episodes", type=int, default=20, help="episodes per DAgger round")
+    tc.add_argument(
+        "--critic-warmup", type=int, default=0, help="[updates] critic-only updates before PPO"
+    )
     tc.add_argument("--checkpoint-every", type=int, default=50, help="[updates]")
     tc.add_argument("--threads", type=int, default=1, help="torch threads")
     tc.add_argument(

@@ -1,12 +1,14 @@
 """CrowdNav++ baseline: graph observation, attention and masking, increments → commands, PPO's
 GAE against a brute-force oracle, the reward terms, checkpoints, determinism, the shipped
-weights in the spawned-process harness, and the training command end to end with resume."""
+weights in the spawned-process harness, the training command end to end with resume, and the
+imitation warm start (teacher actions in the policy's action space, cloning, resume after it)."""
 
 from __future__ import annotations
 
 import csv
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from pioneer.control.policy import build_policy
 from pioneer.errors import ConfigError, DataError
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import PolicySpec, evaluate
+from pioneer.learn import crowdnav_bc
 from pioneer.learn.crowdnav import (
     CrowdNavConfig,
     CrowdNavNet,
@@ -28,9 +31,19 @@ from pioneer.learn.crowdnav import (
     save_crowdnav,
     shipped_weights,
 )
+from pioneer.learn.crowdnav_bc import (
+    WarmStartConfig,
+    action_from_command,
+    bc_loss,
+    collect_episodes,
+    load_bc_data,
+    save_bc_data,
+    train_bc,
+)
 from pioneer.learn.ppo import PPOConfig, RewardConfig, compute_gae, crowdnav_reward
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
+from pioneer.sim.scenarios import get_scenario, sample_state
 from pioneer.sim.world import step
 from pioneer_testutils import assert_house_message, make_state, open_world
 
@@ -320,3 +333,102 @@ def test_train_cli_refuses_other_settings_on_resume(tmp_path, capsys):
     assert _train(tmp_path, 120, "--lr", "1e-3") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ppo.lr" in err[0]
+
+
+# ------------------------------------------------------------------------- imitation warm start
+@pytest.fixture(scope="module")
+def teacher_episode():
+    from pioneer.control.teacher import make_teacher
+
+    sc = get_scenario("hr-rl")
+    world = sc.world()
+    cfg = CrowdNavConfig(max_humans=3)
+    data = collect_episodes(sc, world, make_teacher("hr-rl"), [123], cfg)
+    return sc, world, cfg, data
+
+
+def test_action_from_command_inverts_command_from_action():
+    cfg = CrowdNavConfig()
+    rng = np.random.default_rng(0)
+    a = rng.uniform(-1.0, 1.0, size=(50, 2))
+    v_prev = rng.uniform(0.2, 0.6, size=50)  # away from v_min/v_max: no command clipping
+    u = command_from_action(a, v_prev, RobotConfig(), 0.1, cfg)
+    np.testing.assert_allclose(action_from_command(u, v_prev, 0.1, cfg), a, atol=1e-12)
+    # Out of reach: clipped to the increment bounds.
+    far = action_from_command(np.array([[0.8, -1.2]]), np.array([0.0]), 0.1, cfg)
+    np.testing.assert_allclose(far, [[1.0, -1.0]])
+
+
+def test_teacher_episode_replays_through_the_action_space(teacher_episode):
+    sc, world, cfg, data = teacher_episode
+    sim = world.sim
+    assert data.ep_event.tolist() == [1]  # the teacher succeeds through the action space
+    s = sample_state(sc, np.random.default_rng(int(data.ep_seed[0])))
+    for t in range(data.episode.size):
+        cmd = command_from_action(data.action[t : t + 1], s.command[:, 0], sim.robot, sim.dt, cfg)
+        np.testing.assert_allclose(cmd[0], data.command[t], atol=1e-6)  # float32 labels
+        # The applied command is the teacher's, clipped to what one increment can reach.
+        lo = max(sim.robot.v_min, s.command[0, 0] + cfg.dv_range[0])
+        hi = min(sim.robot.v_max, s.command[0, 0] + cfg.dv_range[1])
+        want_v = np.clip(data.teacher_command[t, 0], lo, hi)
+        assert abs(data.command[t, 0] - want_v) < 1e-6
+        w_max = min(sim.robot.omega_max, cfg.dtheta_range[1] / sim.dt)
+        assert abs(data.command[t, 1] - np.clip(data.teacher_command[t, 1], -w_max, w_max)) < 1e-6
+        s = step(world, s, cmd)
+    assert s.reached[0]
+    summary = data.summary()
+    assert summary["teacher_clipped_fraction"] < 0.2
+
+
+def test_bc_reduces_imitation_loss_and_data_round_trip(teacher_episode, tmp_path):
+    data = teacher_episode[3]
+    small = CrowdNavConfig(max_humans=3, embed=16, hidden=16, head_hidden=16)
+    warm = WarmStartConfig(bc_episodes=1, bc_epochs=40, bc_lr=1e-2)
+    before = bc_loss(CrowdNavNet(small, seed=0), data)
+    model, losses = train_bc(data, small, warm, seed=0)
+    assert losses[-1] < 0.7 * losses[0]
+    assert bc_loss(model, data) < 0.7 * before
+    assert torch.all(model.log_std >= math.log(warm.min_std) - 1e-6)
+    again, losses2 = train_bc(data, small, warm, seed=0)  # seeded: identical
+    assert losses == losses2
+    assert all(torch.equal(v, again.state_dict()[k]) for k, v in model.state_dict().items())
+    p = save_bc_data(data, tmp_path / "d.npz", {"settings": {"x": 1}})
+    back, meta = load_bc_data(p)
+    assert meta["settings"] == {"x": 1}
+    for k, v in data.fields().items():
+        np.testing.assert_array_equal(getattr(back, k), v)
+    (tmp_path / "bad.npz").write_bytes(b"nope")
+    with pytest.raises(DataError):
+        load_bc_data(tmp_path / "bad.npz")
+    with pytest.raises(ConfigError):
+        WarmStartConfig(dagger_rounds=1)
+
+
+def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monkeypatch):
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    warm = ["--bc-episodes", "2", "--bc-epochs", "2", "--critic-warmup", "1"]
+    assert _train(b, 120, *warm) == 0  # uninterrupted: imitation, 1 critic-only + 1 PPO update
+    info = json.loads((b / "train.json").read_text())
+    assert info["imitation"]["data"]["episodes"] == 2 and info["updates"] == 2
+    assert load_crowdnav(b / "bc_policy.safetensors").config.max_humans == 3
+    assert _train(a, 60, *warm) == 0  # stopped after the critic warm-up update
+
+    def boom(*args, **kwargs):
+        raise AssertionError("the imitation phase was redone")
+
+    monkeypatch.setattr(crowdnav_bc, "collect_episodes", boom)
+    monkeypatch.setattr(crowdnav_bc, "train_bc", boom)
+    assert _train(a, 120, *warm, "--resume") == 0  # from the checkpoint
+    # Interrupted after imitation, before any PPO checkpoint: its files are reused.
+    c.mkdir()
+    for name in ("bc_data.npz", "bc_policy.safetensors"):
+        shutil.copy(a / name, c / name)
+    assert _train(c, 120, *warm) == 0
+    for out in (a, c):
+        assert _curve(out) == _curve(b)
+        wo, wb = load_crowdnav(out / "policy.safetensors"), load_crowdnav(b / "policy.safetensors")
+        for k, v in wo.state_dict().items():
+            assert torch.equal(v, wb.state_dict()[k]), (out.name, k)
+    assert _train(a, 180, "--bc-episodes", "3", "--bc-epochs", "2", "--critic-warmup", "1") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bc_episodes" in err[0]

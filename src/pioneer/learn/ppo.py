@@ -40,6 +40,13 @@ values, except:
   update costs about the same for 16 or 64 (10 gradient steps, dominated by per-op overhead),
   so 4× the data per update comes almost free in wall time.
 
+Imitation warm start (``--bc-episodes N``, :mod:`pioneer.learn.crowdnav_bc`; a deviation from
+CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
+clones the lookahead teacher (optionally with DAgger rounds); its result is stored in ``out``
+and in the first checkpoint, so a resumed run never redoes it. ``--critic-warmup U``: the
+first U updates train only the critic head (own Adam), the cloned actor frozen, so PPO's
+first policy updates see a fitted critic. Both are off by default (pure PPO, as above).
+
 Recurrent minibatches are whole 30-step sequences of a subset of the environments; the GRU
 is re-run from the rollout's first hidden state with resets at episode starts. Advantages are
 normalised over the rollout.
@@ -52,7 +59,9 @@ Outputs in ``out/`` (each written atomically)
                                 bytes as a tensor) — a resumed run is identical to an
                                 uninterrupted one;
     ``policy.safetensors``      the policy weights (:func:`pioneer.learn.crowdnav.load_crowdnav`);
-    ``curve.csv`` / ``curve.png``  the learning curve, ``train.json`` the run's summary.
+    ``curve.csv`` / ``curve.png``  the learning curve, ``train.json`` the run's summary;
+    ``bc_data.npz`` / ``bc_policy.safetensors``  the imitation data and the cloned policy
+                                (with ``--bc-episodes``).
 
 Resuming: running the same command on an ``out`` that holds a checkpoint continues from it
 (``--resume`` insists on one). A larger ``--steps`` extends a finished run; any other setting
@@ -87,6 +96,7 @@ from pioneer.learn.crowdnav import (
     command_from_action,
     save_crowdnav,
 )
+from pioneer.learn.crowdnav_bc import WarmStartConfig
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, step
 
@@ -293,11 +303,18 @@ class _Trainer:
         ppo: PPOConfig,
         net: CrowdNavConfig,
         reward: RewardConfig,
+        warm: WarmStartConfig | None = None,
     ) -> None:
         self.scenario, self.ppo, self.net_cfg, self.reward_cfg = scenario, ppo, net, reward
+        self.warm = warm or WarmStartConfig()
         self.world = scenario.world()
         self.model = CrowdNavNet(net, seed=ppo.seed)
         self.opt = torch.optim.Adam(self.model.parameters(), lr=ppo.lr, eps=ppo.adam_eps)
+        # The critic warm-up trains the critic head alone, with its own optimiser.
+        self.critic_params = [*self.model.critic.parameters(), *self.model.value_head.parameters()]
+        self.critic_opt = torch.optim.Adam(
+            self.critic_params, lr=self.warm.critic_lr, eps=ppo.adam_eps
+        )
         self.rng = np.random.default_rng(np.random.SeedSequence([ppo.seed, 0x0C20D]))
         self.gen = torch.Generator().manual_seed(ppo.seed + 1)
         b = ppo.n_envs
@@ -394,8 +411,10 @@ class _Trainer:
 
     # -------------------------------------------------------------------- update
     def learn(self, batch: dict[str, Any]) -> dict[str, float]:
-        """PPO epochs over the rollout; returns mean losses."""
+        """PPO epochs over the rollout (or, during the critic warm-up, value regression of the
+        critic head alone); returns mean losses."""
         ppo, model = self.ppo, self.model
+        warmup = self.update < self.warm.critic_warmup
         adv = batch["adv"]
         adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         stats = {"policy_loss": 0.0, "value_loss": 0.0, "entropy": 0.0, "n": 0.0}
@@ -415,6 +434,16 @@ class _Trainer:
                 for t in range(x.shape[0]):
                     h = model.gru(x[t], h * keep[t])
                     hs.append(h)
+                if warmup:
+                    value = model.value_head(model.critic(torch.stack(hs).detach())).squeeze(-1)
+                    vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
+                    self.critic_opt.zero_grad(set_to_none=True)
+                    (ppo.value_coef * vl).backward()
+                    torch.nn.utils.clip_grad_norm_(self.critic_params, ppo.max_grad_norm)
+                    self.critic_opt.step()
+                    stats["value_loss"] += float(vl.detach())
+                    stats["n"] += 1
+                    continue
                 mean, value = model.heads(torch.stack(hs))
                 dist = torch.distributions.Normal(mean, torch.exp(model.log_std))
                 logp = dist.log_prob(batch["action"][:, idx]).sum(-1)
@@ -462,12 +491,15 @@ class _Trainer:
         ppo = self.ppo.to_dict()
         for k in ("total_steps", "checkpoint_every"):
             ppo.pop(k)
-        return {
+        out = {
             "scenario": self.scenario.name,
             "ppo": ppo,
             "net": self.net_cfg.to_dict(),
             "reward": self.reward_cfg.to_dict(),
         }
+        if self.warm.active:  # absent for pure PPO: older checkpoints stay resumable
+            out["warm_start"] = self.warm.to_dict()
+        return out
 
     def save(self, path: Path) -> None:
         """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
@@ -481,6 +513,10 @@ class _Trainer:
         for i, st in osd["state"].items():
             for k, v in st.items():
                 tensors[f"optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        cosd = self.critic_opt.state_dict()
+        for i, st in cosd["state"].items():
+            for k, v in st.items():
+                tensors[f"critic_optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
         for k in _state_fields():
             tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
         tensors["train/h"] = self.h.clone().contiguous()
@@ -496,6 +532,7 @@ class _Trainer:
             "format": TRAIN_FORMAT,
             "settings": json.dumps(self.settings()),
             "param_groups": json.dumps(osd["param_groups"]),
+            "critic_param_groups": json.dumps(cosd["param_groups"]),
             "counters": json.dumps(
                 {
                     "update": self.update,
@@ -544,6 +581,16 @@ class _Trainer:
                 _, i, name = k.split("/")
                 osd["state"].setdefault(int(i), {})[name] = v
         self.opt.load_state_dict(osd)
+        if "critic_param_groups" in meta:
+            cosd: dict[str, Any] = {
+                "state": {},
+                "param_groups": json.loads(meta["critic_param_groups"]),
+            }
+            for k, v in t.items():
+                if k.startswith("critic_optim/"):
+                    _, i, name = k.split("/")
+                    cosd["state"].setdefault(int(i), {})[name] = v
+            self.critic_opt.load_state_dict(cosd)
         self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _state_fields()})
         self.h = t["train/h"].clone()
         self.start = t["train/start"].numpy().copy()
@@ -579,7 +626,8 @@ def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool
         plot_learning_curve(
             {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
             out / "curve.png",
-            title=f"CrowdNav++ · {tr.scenario.name} · PPO",
+            title=f"CrowdNav++ · {tr.scenario.name} · "
+            + ("imitation + PPO" if tr.warm.bc_episodes else "PPO"),
         )
         write_text_atomic(out / "train.json", json.dumps(dict(info), indent=2) + "\n")
 
@@ -590,6 +638,7 @@ def train_crowdnav(
     ppo: PPOConfig | None = None,
     net: CrowdNavConfig | None = None,
     reward: RewardConfig | None = None,
+    warm: WarmStartConfig | None = None,
     resume: bool | None = None,
     progress: bool = True,
     command: str = "",
@@ -617,12 +666,26 @@ def train_crowdnav(
         torch.set_num_threads(int(torch_threads))
     # One spatial-edge slot per human of the scenario unless configured otherwise.
     net = net or CrowdNavConfig(max_humans=max(1, len(sc.humans)))
-    tr = _Trainer(sc, ppo, net, reward or RewardConfig())
+    warm = warm or WarmStartConfig()
+    tr = _Trainer(sc, ppo, net, reward or RewardConfig(), warm)
     resumed_from = None
+    bc_info: dict[str, Any] | None = None
     if ckpt.is_file():
         tr.load(ckpt)
         resumed_from = tr.update
     out.mkdir(parents=True, exist_ok=True)
+    if warm.bc_episodes:
+        # Imitation first (reused from out/ when done); the checkpoint then holds its result.
+        from pioneer.learn.crowdnav_bc import warm_start
+
+        if resumed_from is None:
+            bc_model, bc_info = warm_start(sc, net, warm, ppo.seed, out, progress=progress)
+            tr.model.load_state_dict(bc_model.state_dict(), strict=True)
+            tr.save(ckpt)
+        elif (out / "bc_policy.safetensors").is_file():
+            from pioneer.learn.crowdnav import read_crowdnav_meta
+
+            bc_info = read_crowdnav_meta(out / "bc_policy.safetensors")["info"]
 
     def info() -> dict[str, Any]:
         last = tr.curve[-1] if tr.curve else [math.nan] * len(CURVE_COLUMNS)
@@ -637,6 +700,12 @@ def train_crowdnav(
             "final": dict(zip(CURVE_COLUMNS[3:7], last[3:7], strict=True)),
             "ppo": ppo.to_dict(),
             "reward": tr.reward_cfg.to_dict(),
+            **({"warm_start": warm.to_dict()} if warm.active else {}),
+            **(
+                {"imitation": {k: bc_info[k] for k in ("data", "bc_loss", "log_std")}}
+                if bc_info
+                else {}
+            ),
         }
 
     from tqdm import tqdm
