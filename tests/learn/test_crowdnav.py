@@ -429,6 +429,7 @@ def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monke
         wo, wb = load_crowdnav(out / "policy.safetensors"), load_crowdnav(b / "policy.safetensors")
         for k, v in wo.state_dict().items():
             assert torch.equal(v, wb.state_dict()[k]), (out.name, k)
+    capsys.readouterr()
     assert _train(a, 180, "--bc-episodes", "3", "--bc-epochs", "2", "--critic-warmup", "1") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bc_episodes" in err[0]
