@@ -87,7 +87,10 @@ def safe_risky(
 
 
 def _f(x: float, digits: int = 3) -> str:
-    return f"{x:.{digits}f}" if isinstance(x, int | float) and math.isfinite(x) else "–"
+    """``digits`` decimals, or 3 significant digits for small values (ours are ~1e−3)."""
+    if not (isinstance(x, int | float) and math.isfinite(x)):
+        return "–"
+    return f"{x:.3g}" if 0 < abs(x) < 0.1 else f"{x:.{digits}f}"
 
 
 def table_iv_markdown(results: Mapping[str, Mapping[str, Any]], scenarios: Sequence[str]) -> str:

@@ -74,7 +74,7 @@ def plot_uncertainty_histogram(
                 ax.hist(
                     v,
                     bins=bins,
-                    density=True,
+                    weights=np.full(v.size, 1.0 / v.size),  # share of the class's frames
                     alpha=0.55,
                     color=colour,
                     label=f"{cls} (n={v.size}, mean {mean:.3g})",
@@ -82,6 +82,7 @@ def plot_uncertainty_histogram(
         ax.set_xscale("log")
         ax.set_title(label, fontsize=9)
         ax.set_xlabel("uncertainty [(m/s)² + (rad/s)²]")
+        ax.set_ylabel("share of the class's frames")
         ax.legend(fontsize=7)
     if title:
         fig.suptitle(title, fontsize=10)
