@@ -286,6 +286,7 @@ def _cmd_train_crowdnav(args: argparse.Namespace) -> int:
         checkpoint_every=args.checkpoint_every,
     )
     warm = WarmStartConfig(
+        expert=args.bc_expert,
         bc_episodes=args.bc_episodes,
         bc_epochs=args.bc_epochs,
         dagger_rounds=args.dagger_rounds,
@@ -385,7 +386,13 @@ def _parser() -> argparse.ArgumentParser:
     tc.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
     tc.add_argument("--entropy-coef", type=float, default=0.01, help="PPO entropy bonus")
     tc.add_argument(
-        "--bc-episodes", type=int, default=0, help="teacher demonstrations to imitate first (0: no)"
+        "--bc-episodes", type=int, default=0, help="expert demonstrations to imitate first (0: no)"
+    )
+    tc.add_argument(
+        "--bc-expert",
+        choices=["sfm", "dwa", "teacher"],
+        default="sfm",
+        help="the demonstrator (sfm, dwa: independent of PioneeR; teacher: PioneeR's own)",
     )
     tc.add_argument("--bc-epochs", type=int, default=30, help="behaviour-cloning epochs")
     tc.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning")

@@ -93,6 +93,7 @@ __all__ = [
 DATA_FORMAT = "pioneer.crowdnav-bc/1"
 DATA_FILE = "bc_data.npz"
 POLICY_FILE = "bc_policy.safetensors"
+EXPERTS = ("sfm", "dwa", "teacher")
 SUCCESS, COLLISION, TIMEOUT = 1, 2, 3
 F64 = NDArray[np.float64]
 
@@ -101,7 +102,8 @@ F64 = NDArray[np.float64]
 class WarmStartConfig(Config):
     """Imitation warm start and critic warm-up (all off by default: pure PPO)."""
 
-    bc_episodes: int = 0  # teacher-driven demonstration episodes (0: no imitation)
+    expert: str = "sfm"  # the demonstrator: "sfm" | "dwa" (independent of PioneeR) | "teacher"
+    bc_episodes: int = 0  # expert-driven demonstration episodes (0: no imitation)
     bc_epochs: int = 30  # passes over the dataset per cloning
     bc_batch: int = 16  # episodes per minibatch
     bc_lr: float = 1e-3  # Adam learning rate of the cloning
@@ -127,6 +129,10 @@ class WarmStartConfig(Config):
                 )
         for name in ("bc_lr", "min_std", "critic_lr"):
             check_positive("WarmStartConfig", name, getattr(self, name))
+        if self.expert not in EXPERTS:
+            raise ConfigError(
+                expect("WarmStartConfig.expert", f"one of {EXPERTS}", self.expert, "use sfm")
+            )
         if self.dagger_rounds and not self.bc_episodes:
             raise ConfigError(
                 expect(
@@ -287,7 +293,7 @@ def collect_episodes(
         n = 0
         while True:
             obs = build_observation(s, world, net_cfg)
-            u_star = np.asarray(teacher.decide(world, s, prev=s.command[0]).command)
+            u_star = expert_command(teacher, world, s)
             a_star = action_from_command(u_star, s.command[:, 0], sim.dt, net_cfg)
             if model is None:
                 a = a_star
@@ -314,6 +320,29 @@ def collect_episodes(
         ep_round=np.full(len(seeds), round_index, dtype=np.int64),
         ep_event=np.asarray(events, dtype=np.int8),
     )
+
+
+def expert_command(expert: Any, world: World, state: State) -> F64:
+    """The demonstrator's command ``(v, ω)`` in ``state``: the lookahead teacher smooths from
+    the applied command; the rule-based experts (``sfm``, ``dwa``) decide from the state."""
+    from pioneer.control.teacher import LookaheadTeacher
+
+    if isinstance(expert, LookaheadTeacher):
+        return np.asarray(expert.decide(world, state, prev=state.command[0]).command)
+    return np.asarray(expert.decide(world, state), dtype=np.float64)
+
+
+def make_expert(name: str, scenario: str) -> Any:
+    """The demonstrator ``name`` (one of :data:`EXPERTS`) for ``scenario``."""
+    from pioneer.control.policy import build_policy
+
+    if name == "teacher":
+        from pioneer.control.teacher import make_teacher
+
+        return make_teacher(scenario)
+    import pioneer.control  # noqa: F401  (registers the classical controllers)
+
+    return build_policy(name, scenario)
 
 
 def episode_seeds(seed: int, round_index: int, n: int) -> list[int]:
@@ -429,8 +458,6 @@ def warm_start(
 ) -> tuple[CrowdNavNet, dict[str, Any]]:
     """The imitation phase, resumable: the cloned model and its summary (``out`` files in the
     module docstring). A complete ``bc_policy.safetensors`` of the same settings is reused."""
-    from pioneer.control.teacher import make_teacher
-
     if log is None:
         log = functools.partial(print, flush=True)
 
@@ -440,6 +467,7 @@ def warm_start(
         "net": net_cfg.to_dict(),
         "bc_episodes": config.bc_episodes,
         "dagger_episodes": config.dagger_episodes,
+        "expert": config.expert,
     }
     # The DAgger rounds' data depends on the cloning settings too (their drivers are clones).
     clone = {
@@ -475,7 +503,7 @@ def warm_start(
         check(path, meta.get("settings"), settings)
         if meta.get("clone") != json.loads(json.dumps(clone)):
             data = data.rounds(1)  # the teacher's episodes stay valid, the DAgger rounds not
-    teacher = make_teacher(scenario.name)
+    teacher = make_expert(config.expert, scenario.name)
     t0 = time.perf_counter()
     for r in range(config.dagger_rounds + 1):
         if data is not None and np.any(data.ep_round == r):

@@ -38,7 +38,8 @@ values, except:
   with and without it settled the same way ("drive to the door and wait", docs/baselines.md);
 - the shipped weights use 64 environments (``--envs 64``; default 16 as the original): the
   update costs about the same for 16 or 64 (10 gradient steps, dominated by per-op overhead),
-  so 4× the data per update comes almost free in wall time.
+  so 4× the data per update comes almost free in wall time; they fine-tune an imitation
+  warm start (below) with lr 3e−5 and no entropy bonus (``--lr 3e-5 --entropy-coef 0``).
 
 Imitation warm start (``--bc-episodes N``, :mod:`pioneer.learn.crowdnav_bc`; a deviation from
 CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
