@@ -16,8 +16,10 @@ from numpy.typing import NDArray
 from pioneer.errors import ConfigError, expect
 
 __all__ = [
+    "LAZY_POLICIES",
     "Policy",
     "build_policy",
+    "check_policy_name",
     "make_policy",
     "policy_factory",
     "policy_names",
@@ -51,6 +53,18 @@ def register_policy(name: str, factory: Callable[..., Policy]) -> None:
 def policy_names() -> list[str]:
     """Registered policy names."""
     return sorted(_FACTORIES)
+
+
+# Registered by pioneer.learn on first use (it imports torch, which costs ≈ 250 MB).
+LAZY_POLICIES = ("crowdnav++", "student-mdn", "student-mlp", "student-onnx", "student-shield")
+
+
+def check_policy_name(name: str) -> None:
+    """Raise :class:`ConfigError` unless ``name`` is registered or registered on first use —
+    without importing torch (the evaluation parent only checks names; workers build)."""
+    if name not in _FACTORIES and name not in LAZY_POLICIES:
+        known = sorted({*_FACTORIES, *LAZY_POLICIES})
+        raise ConfigError(expect("policy", f"one of {known}", name, "pick a listed policy"))
 
 
 def policy_factory(name: str) -> Callable[..., Policy]:

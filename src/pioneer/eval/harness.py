@@ -255,13 +255,13 @@ def evaluate(
     if backend not in ("process", "ray"):
         raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
     import pioneer.control  # noqa: F401  (registers the policies)
-    from pioneer.control.policy import policy_factory
+    from pioneer.control.policy import check_policy_name
     from pioneer.sim.scenarios import get_scenario
 
     for sc in scenarios:  # fail before running anything, not hours in
         get_scenario(sc)
     for spec in policies:
-        policy_factory(spec.name)
+        check_policy_name(spec.name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / EPISODES_FILE
