@@ -2,7 +2,7 @@
 
 Steps (each output is written atomically; the evaluation resumes if interrupted):
 1. fit the density reward of each elevator scenario on its shipped demos → ``models/``;
-2. evaluate the teacher, its three ablations, the baselines (paper Tables I–II) and the shipped
+2. evaluate the teacher, its three ablations, the baselines (paper Tables I–II), and the shipped
    DAgger students — MDN, MLP and the uncertainty-shielded MDN (Table III) — on HR-RL and HL-RR;
 3. write ``summary.json``, ``summary.md`` and ``summary.csv`` (our rows beside the paper's) and
    the safe/risky uncertainty analysis of the MDN (Table IV, ``uncertainty.json``, histogram);
