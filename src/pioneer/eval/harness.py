@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import multiprocessing as mp
 import os
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
@@ -194,24 +192,10 @@ def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
         for t in tasks:
             yield run_task(t)
         return
-    # One BLAS thread per worker: the workers already use every core.
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-        pending: set[Future[dict[str, Any]]] = set()
-        it = iter(tasks)
-        for t in it:  # keep a bounded queue so an interrupt loses little work
-            pending.add(pool.submit(run_task, t))
-            if len(pending) >= 4 * workers:
-                break
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                yield f.result()
-                nxt = next(it, None)
-                if nxt is not None:
-                    pending.add(pool.submit(run_task, nxt))
+    from pioneer.parallel import bounded_map, spawn_pool
+
+    with spawn_pool(workers, _worker_init) as pool:
+        yield from bounded_map(pool, run_task, tasks, 4 * workers)
 
 
 def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:

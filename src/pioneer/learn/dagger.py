@@ -33,11 +33,10 @@ import dataclasses
 import io
 import json
 import math
-import multiprocessing as mp
 import os
 import zlib
 from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +57,7 @@ from pioneer.learn.models import (
     save_student,
     train_student,
 )
+from pioneer.parallel import bounded_map, spawn_pool
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "dagger_seed", "run_dagger"]
 
@@ -224,19 +224,7 @@ def _run_parallel(
         for t in tasks:
             yield _collect_task(t)
         return
-    it = iter(tasks)  # a bounded queue: an interrupt loses little work
-    pending: set[Future[str]] = set()
-    for t in it:
-        pending.add(pool.submit(_collect_task, t))
-        if len(pending) >= 2 * workers:
-            break
-    while pending:
-        done, pending = wait(pending, return_when=FIRST_COMPLETED)
-        for f in done:
-            yield f.result()
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.add(pool.submit(_collect_task, nxt))
+    yield from bounded_map(pool, _collect_task, tasks, 2 * workers)
 
 
 def _pool(workers: int) -> contextlib.AbstractContextManager[ProcessPoolExecutor | None]:
@@ -244,10 +232,7 @@ def _pool(workers: int) -> contextlib.AbstractContextManager[ProcessPoolExecutor
     if workers <= 1:
         _worker_init()
         return contextlib.nullcontext()
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    ctx = mp.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
+    return spawn_pool(workers, _worker_init)
 
 
 def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
