@@ -809,18 +809,22 @@ def bench_teacher_decision(plan: Plan) -> dict[str, Any]:
     }
 
 
-def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
-    """CVaR-BF decision time over the states of seeded HR-RL episodes (as the original paper
-    reports its solver time), next to the teacher's."""
-    from pioneer.control.policy import build_policy
+def episode_decision_times(
+    policy_for: Callable[[int], Any], episodes: int, seed0: int, warmup: int = 0
+) -> np.ndarray:
+    """Seconds per ``policy.act`` over the states of ``episodes`` seeded HR-RL episodes;
+    ``policy_for(ep)`` gives the policy of episode ``ep``, ``warmup`` untimed calls first."""
     from pioneer.sim.env import NavEnv
 
     env = NavEnv("hr-rl")
     times: list[float] = []
-    for ep in range(plan.cvar_episodes):
-        policy = build_policy("cvar-bf", "hr-rl")
-        obs, info = env.reset(seed=SEED + 40 + ep)
-        policy.reset(info, np.random.default_rng(SEED + 40 + ep))
+    for ep in range(episodes):
+        policy = policy_for(ep)
+        obs, info = env.reset(seed=seed0 + ep)
+        policy.reset(info, np.random.default_rng(seed0 + ep))
+        for _ in range(warmup):  # first calls allocate
+            policy.act(obs, info)
+        policy.reset(info, np.random.default_rng(seed0 + ep))
         done = False
         while not done:
             t0 = time.perf_counter()
@@ -828,7 +832,17 @@ def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
             times.append(time.perf_counter() - t0)
             obs, _, term, trunc, info = env.step(u)
             done = term or trunc
-    secs = np.asarray(times)
+    return np.asarray(times)
+
+
+def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
+    """CVaR-BF decision time over the states of seeded HR-RL episodes (as the original paper
+    reports its solver time), next to the teacher's."""
+    from pioneer.control.policy import build_policy
+
+    secs = episode_decision_times(
+        lambda _: build_policy("cvar-bf", "hr-rl"), plan.cvar_episodes, SEED + 40
+    )
     return {
         "metrics": {
             "ms_decision": metric(secs * 1e3, "ms", ("<=", 20.0)),
@@ -1013,25 +1027,10 @@ def bench_crowdnav_decision(plan: Plan) -> dict[str, Any]:
     step, increments → command) over the states of seeded HR-RL episodes, shipped weights,
     one torch thread."""
     from pioneer.control.policy import build_policy
-    from pioneer.sim.env import NavEnv
 
-    env = NavEnv("hr-rl")
     policy = build_policy("crowdnav++", "hr-rl")  # sets torch to 1 thread
-    times: list[float] = []
-    for ep in range(plan.cvar_episodes):  # the same episode count as CVaR-BF's benchmark
-        obs, info = env.reset(seed=SEED + 70 + ep)
-        policy.reset(info, np.random.default_rng(SEED + 70 + ep))
-        for _ in range(5):  # warm-up: first calls allocate
-            policy.act(obs, info)
-        policy.reset(info, np.random.default_rng(SEED + 70 + ep))
-        done = False
-        while not done:
-            t0 = time.perf_counter()
-            u = policy.act(obs, info)
-            times.append(time.perf_counter() - t0)
-            obs, _, term, trunc, info = env.step(u)
-            done = term or trunc
-    secs = np.asarray(times)
+    # the same episode count as CVaR-BF's benchmark
+    secs = episode_decision_times(lambda _: policy, plan.cvar_episodes, SEED + 70, warmup=5)
     return {
         "metrics": {
             "ms_decision": metric(secs * 1e3, "ms", ("<=", 1.0)),

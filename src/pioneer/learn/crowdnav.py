@@ -63,7 +63,6 @@ Checkpoints (:func:`save_crowdnav` / :func:`load_crowdnav`) are safetensors with
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -77,7 +76,7 @@ from torch import nn
 from pioneer.config import Config, check_positive
 from pioneer.control.policy import register_policy
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.io import atomic_path
+from pioneer.learn.checkpoint import read_checkpoint, write_checkpoint
 from pioneer.learn.models import _linear
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
@@ -321,42 +320,13 @@ def save_crowdnav(
     model: CrowdNavNet, path: str | Path, info: Mapping[str, Any] | None = None
 ) -> Path:
     """Write the policy weights to ``.safetensors`` (atomically), config and ``info`` as JSON."""
-    from safetensors.torch import save
-
-    tensors = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-    meta = {
-        "format": CHECKPOINT_FORMAT,
-        "config": json.dumps(model.config.to_dict()),
-        "info": json.dumps(dict(info or {})),
-        "torch": torch.__version__,
-    }
-    target = Path(path)
-    with atomic_path(target) as tmp:  # bytes, not save_file: that makes the file mode 0600
-        tmp.write_bytes(save(tensors, metadata=meta))
-    return target
+    return write_checkpoint(model, model.config.to_dict(), path, CHECKPOINT_FORMAT, info)
 
 
 def _read(p: Path, tensors: bool) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
-    from safetensors import SafetensorError, safe_open
-
     fix = "train it with `pioneer train crowdnav++` (the file is missing, corrupt or not one)"
-    if not p.is_file():
-        raise DataError(expect("CrowdNav++ weights", "an existing file", str(p), fix))
-    try:
-        with safe_open(str(p), framework="pt") as fh:
-            raw = dict(fh.metadata() or {})
-            arrays = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118
-    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
-        raise DataError(
-            expect(f"CrowdNav++ weights {p}", "a readable .safetensors file", str(exc), fix)
-        ) from exc
-    if raw.get("format") != CHECKPOINT_FORMAT:
-        raise DataError(expect(f"{p}: format", CHECKPOINT_FORMAT, raw.get("format"), fix))
-    try:
-        meta = {"config": json.loads(raw["config"]), "info": json.loads(raw.get("info", "{}"))}
-    except (KeyError, json.JSONDecodeError) as exc:
-        raise DataError(expect(f"{p}: metadata", "JSON 'config'", "missing/invalid", fix)) from exc
-    return meta, arrays
+    meta, arrays = read_checkpoint(p, CHECKPOINT_FORMAT, "CrowdNav++ weights", fix, fix, tensors)
+    return {"config": meta["config"], "info": meta["info"]}, arrays
 
 
 def read_crowdnav_meta(path: str | Path) -> dict[str, Any]:

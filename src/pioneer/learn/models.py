@@ -28,7 +28,6 @@ Choices and deviations from the paper:
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -43,7 +42,7 @@ from torch import nn
 from pioneer.config import Config, check_nonnegative
 from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.io import atomic_path
+from pioneer.learn.checkpoint import read_checkpoint, write_checkpoint
 from pioneer.sim.lidar import OBS_DIM
 
 __all__ = [
@@ -380,19 +379,7 @@ def save_student(model: Student, path: str | Path, info: Mapping[str, Any] | Non
     :class:`StudentConfig` as JSON and optional free-form ``info`` (JSON-able: data source,
     epochs, final loss …). No pickle: loading cannot execute code.
     """
-    from safetensors.torch import save_file
-
-    tensors = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-    meta = {
-        "format": CHECKPOINT_FORMAT,
-        "config": json.dumps(model.config.to_dict()),
-        "info": json.dumps(dict(info or {})),
-        "torch": torch.__version__,
-    }
-    target = Path(path)
-    with atomic_path(target) as tmp:
-        save_file(tensors, str(tmp), metadata=meta)
-    return target
+    return write_checkpoint(model, model.config.to_dict(), path, CHECKPOINT_FORMAT, info)
 
 
 def read_checkpoint_meta(path: str | Path) -> dict[str, Any]:
@@ -402,30 +389,10 @@ def read_checkpoint_meta(path: str | Path) -> dict[str, Any]:
 
 
 def _read_checkpoint(p: Path, tensors: bool) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
-    from safetensors import SafetensorError, safe_open
-
     fix = "re-save it with save_student (the file is truncated, corrupt or not a checkpoint)"
-    if not p.is_file():
-        raise DataError(expect("student checkpoint", "an existing file", str(p), "check the path"))
-    try:
-        with safe_open(str(p), framework="pt") as fh:
-            raw = dict(fh.metadata() or {})
-            arrays = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118
-    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
-        raise DataError(
-            expect(f"student checkpoint {p}", "a readable .safetensors file", f"{exc}", fix)
-        ) from exc
-    if raw.get("format") != CHECKPOINT_FORMAT:
-        raise DataError(expect(f"{p}: format", CHECKPOINT_FORMAT, raw.get("format"), fix))
-    try:
-        meta = {
-            "format": raw["format"],
-            "config": json.loads(raw["config"]),
-            "info": json.loads(raw.get("info", "{}")),
-        }
-    except (KeyError, json.JSONDecodeError) as exc:
-        raise DataError(expect(f"{p}: metadata", "JSON 'config'", "missing/invalid", fix)) from exc
-    return meta, arrays
+    return read_checkpoint(
+        p, CHECKPOINT_FORMAT, "student checkpoint", fix, "check the path", tensors
+    )
 
 
 def load_student(path: str | Path) -> MDN | MLPStudent:

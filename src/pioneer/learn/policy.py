@@ -46,6 +46,7 @@ class StudentPolicy:
         self.model = model.eval()
         self.name = name or f"student-{model.kind}"
         self.action_mode = action_mode or model.config.action_mode
+        self.checkpoint: Path | None = None  # the file it was loaded from (make_student_policy)
         self.uncertainty: list[tuple[float, float]] = []
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
@@ -104,7 +105,9 @@ def make_student_policy(
                 f"use the policy 'student-{model.kind}'",
             )
         )
-    return StudentPolicy(model, name=name, action_mode=action_mode)
+    policy = StudentPolicy(model, name=name, action_mode=action_mode)
+    policy.checkpoint = Path(path)
+    return policy
 
 
 register_policy(

@@ -135,15 +135,12 @@ def make_shield_policy(
     """Policy factory: an MDN student (default: the shipped one of ``scenario``) shielded by
     ``fallback`` (a registered policy name; the teacher gets ``reward`` if given)."""
     student = make_student_policy(checkpoint, scenario=scenario, kind="mdn")
-    ckpt_path = checkpoint
-    if ckpt_path is None:
-        from pioneer.data import shipped_student
-
-        assert scenario is not None  # make_student_policy has checked
-        ckpt_path = shipped_student(scenario, "mdn")
-    elif scenario is not None:
-        ckpt_path = str(ckpt_path).format(scenario=scenario)
-    thr = threshold if threshold is not None else default_threshold(ckpt_path, signal, quantile)
+    assert student.checkpoint is not None
+    thr = (
+        threshold
+        if threshold is not None
+        else default_threshold(student.checkpoint, signal, quantile)
+    )
     fb = None
     if mode == "handover":
         kwargs: dict[str, Any] = {"reward": reward} if (fallback == "teacher" and reward) else {}
