@@ -234,6 +234,8 @@ def _cmd_distill(args: argparse.Namespace) -> int:
     cfg = DaggerConfig(
         scenario=args.scenario,
         student=args.student,
+        action_mode=args.action_mode,
+        nll_beta=args.nll_beta,
         teacher_episodes=args.teacher_episodes,
         rounds=args.rounds,
         episodes_per_round=args.episodes_per_round,
@@ -347,6 +349,10 @@ def _parser() -> argparse.ArgumentParser:
     d = sub.add_parser("distill", help="DAgger: distil the teacher into a LiDAR-only student")
     d.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, …")
     d.add_argument("--student", choices=["mdn", "mlp"], default="mdn")
+    d.add_argument(
+        "--action-mode", choices=["mode", "mean"], default="mode", help="MDN's executed action"
+    )
+    d.add_argument("--nll-beta", type=float, default=0.0, help="MDN's β-NLL exponent in [0, 1]")
     d.add_argument("--out", required=True, help="output folder (resumes if it exists)")
     d.add_argument("--teacher-episodes", type=int, default=50, help="round 0 episodes")
     d.add_argument("--rounds", type=int, default=10, help="student-driven rounds")

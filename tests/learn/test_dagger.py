@@ -453,7 +453,12 @@ def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
 
 
 @pytest.mark.parametrize(
-    ("changes", "needle"), [({"student": "mlp"}, "student"), ({"seed": 1}, "seed")]
+    ("changes", "needle"),
+    [
+        ({"student": "mlp"}, "student"),
+        ({"seed": 1}, "seed"),
+        ({"action_mode": "mean"}, "action_mode"),
+    ],
 )
 def test_rerun_with_other_settings_is_refused(run_mdn, reward_file, changes, needle):
     res, _ = run_mdn
@@ -493,6 +498,34 @@ def test_mlp_student_run(tmp_path, reward_file):
     np.testing.assert_allclose(ep["applied"], u, rtol=0, atol=1e-6)
 
 
+def test_mean_action_run_drives_and_ships_the_mixture_mean(tmp_path, reward_file):
+    cfg = TINY_CFG.replace(action_mode="mean", teacher_episodes=1, rounds=1, episodes_per_round=1)
+    res = run_dagger(cfg, tmp_path / "mean", workers=1, reward=reward_file, progress=False)
+    for ckpt in (res.student, tmp_path / "mean/rounds/round-00/student.safetensors"):
+        assert load_student(ckpt).config.action_mode == "mean"
+    pol = make_student_policy(tmp_path / "mean/rounds/round-00/student.safetensors")
+    assert pol.action_mode == "mean"
+    ep = _load(tmp_path / "mean/rounds/round-01/ep-000.npz")
+    model = load_student(tmp_path / "mean/rounds/round-00/student.safetensors")
+    with torch.inference_mode():
+        logits, mu, _ = model(torch.as_tensor(ep["obs"]))
+        mean = (torch.softmax(logits, -1).unsqueeze(-1) * mu).sum(-2).numpy()
+    np.testing.assert_allclose(ep["applied"], mean, rtol=0, atol=1e-6)
+
+
+def test_a_run_from_before_the_action_mode_option_resumes(run_mdn, reward_file, tmp_path):
+    """A config.json without ``action_mode`` (written by an older version) means "mode"."""
+    res, _ = run_mdn
+    out = tmp_path / "old"
+    shutil.copytree(res.out, out)
+    old = json.loads((out / "config.json").read_text())
+    del old["action_mode"]
+    (out / "config.json").write_text(json.dumps(old))
+    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert again.curves == res.curves
+    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+
+
 # ------------------------------------------------------------------------------ bad settings
 @pytest.mark.parametrize(
     ("changes", "needle"),
@@ -508,6 +541,7 @@ def test_mlp_student_run(tmp_path, reward_file):
         ({"rounds": 1.5}, "rounds"),
         ({"lr": 0.0}, "lr"),
         ({"lr": math.nan}, "lr"),
+        ({"action_mode": "median"}, "action_mode"),
     ],
 )
 def test_bad_config_values_are_refused(changes, needle):

@@ -100,6 +100,8 @@ def test_config_defaults_match_spec():
         ({"hidden": ()}, "hidden"),
         ({"dropout": 1.0}, "dropout"),
         ({"sigma_floor": -1.0}, "sigma_floor"),
+        ({"nll_beta": -0.5}, "nll_beta"),
+        ({"nll_beta": 1.5}, "nll_beta"),
     ],
 )
 def test_config_rejects_bad_values(changes, needle):
@@ -148,6 +150,55 @@ def test_nll_is_stable_far_from_every_component(rng):
     assert torch.isfinite(loss) and float(loss.detach()) > 1e6
     loss.backward()
     assert all(torch.isfinite(p.grad).all() for p in m.parameters() if p.grad is not None)
+
+
+def _standardised_total_variance(m: MDN, x: torch.Tensor) -> torch.Tensor:
+    """Trace of the mixture covariance in standardised action units, from its definition."""
+    logits, mu, sigma = (t.double() for t in m(x))
+    std = m.act_std.double()
+    pi = torch.softmax(logits, -1)
+    z_mu, z_sigma = mu / std, sigma / std
+    mbar = (pi[..., None] * z_mu).sum(1, keepdim=True)
+    per_k = (z_sigma**2).sum(-1) + ((z_mu - mbar) ** 2).sum(-1)
+    return (pi * per_k).sum(-1)
+
+
+@pytest.mark.parametrize("beta", [0.5, 1.0])
+def test_beta_nll_weights_each_frame_by_its_detached_total_variance(rng, beta):
+    """β-NLL (Seitzer et al., ICLR 2022): −mean(w_i log p_i), w_i ∝ Var_i^β with mean 1 and no
+    gradient through w — brute force against the mixture's own definition."""
+    m = perturbed_mdn(k=3)
+    m.config = StudentConfig(n_components=3, nll_beta=beta)
+    x = torch.from_numpy(random_obs(rng, 16))
+    a = torch.from_numpy(rng.normal(size=(16, 2)).astype(np.float32))
+    with torch.no_grad():
+        v = _standardised_total_variance(m, x) ** beta
+        w = (v / v.mean()).float()
+    expected = -(w * m.log_prob(x, a)).mean()
+    got = m.loss(x, a)
+    assert float(got.detach()) == pytest.approx(float(expected.detach()), rel=1e-5)
+    # The weights matter:
+    assert float(got.detach()) != pytest.approx(float(m.nll(x, a).detach()), rel=1e-3)
+    g_got = torch.autograd.grad(got, list(m.parameters()), allow_unused=True)
+    g_exp = torch.autograd.grad(expected, list(m.parameters()), allow_unused=True)
+    for p, q in zip(g_got, g_exp, strict=True):
+        if p is None or q is None:
+            assert p is None and q is None
+        else:
+            torch.testing.assert_close(p, q, rtol=1e-4, atol=1e-6)
+
+
+def test_beta_nll_is_the_nll_when_beta_is_zero_or_the_variance_constant(rng):
+    m = perturbed_mdn(k=3)
+    x = torch.from_numpy(random_obs(rng, 8))
+    a = torch.from_numpy(rng.normal(size=(8, 2)).astype(np.float32))
+    assert m.config.nll_beta == 0.0
+    with torch.no_grad():
+        assert float(m.loss(x, a)) == float(m.nll(x, a))
+    m.config = StudentConfig(n_components=3, nll_beta=1.0)
+    same = x[:1].expand(8, -1)  # one observation → one variance → all weights 1
+    with torch.no_grad():
+        assert float(m.loss(same, a)) == pytest.approx(float(m.nll(same, a)), rel=1e-6)
 
 
 # ------------------------------------------------------------------------- bimodal toy

@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from pioneer.config import Config
+from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
 from pioneer.io import atomic_path, load_npz, write_text_atomic
 from pioneer.learn.models import (
@@ -72,6 +73,8 @@ class DaggerConfig(Config):
 
     scenario: str = "hr-rl"
     student: str = "mdn"  # "mdn" | "mlp"
+    action_mode: str = "mode"  # MDN's deterministic action in rollouts and checkpoint
+    nll_beta: float = 0.0  # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
     teacher_episodes: int = 50  # round 0, driven by the teacher
     rounds: int = 10  # student-driven rounds after round 0
     episodes_per_round: int = 50
@@ -84,6 +87,10 @@ class DaggerConfig(Config):
     def __post_init__(self) -> None:
         if self.student not in ("mdn", "mlp"):
             raise ConfigError(expect("student", "'mdn' or 'mlp'", self.student, "pick one"))
+        if self.action_mode not in ACTION_MODES:
+            raise ConfigError(
+                expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")
+            )
         for name in ("teacher_episodes", "episodes_per_round", "epochs_initial", "batch"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
@@ -92,6 +99,8 @@ class DaggerConfig(Config):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ConfigError(expect(name, "an integer >= 0", v, f"set {name} >= 0"))
+        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
+            raise ConfigError(expect("nll_beta", "a number in [0, 1]", self.nll_beta, "use 1.0"))
         if not (math.isfinite(self.lr) and self.lr > 0):
             raise ConfigError(expect("lr", "a finite number > 0", self.lr, "use 1e-3"))
 
@@ -244,7 +253,7 @@ def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
 def _check_config(out: Path, cfg: DaggerConfig) -> None:
     p = out / CONFIG_FILE
     if p.exists():
-        old = json.loads(p.read_text())
+        old = {**DaggerConfig().to_dict(), **json.loads(p.read_text())}  # older runs: defaults
         mine = cfg.to_dict()
         fixed = {k: v for k, v in mine.items() if k != "rounds"}
         if {k: v for k, v in old.items() if k != "rounds"} != fixed:
@@ -362,7 +371,12 @@ def run_dagger(
                 history = [float(v) for v in json_info(ckpt).get("loss_history", [])]
             else:
                 if model is None:
-                    model = build_student(StudentConfig(kind=cfg.student), seed=cfg.seed)
+                    model = build_student(
+                        StudentConfig(
+                            kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta
+                        ),
+                        seed=cfg.seed,
+                    )
                 epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
                 history = (
                     train_student(

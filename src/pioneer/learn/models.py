@@ -19,6 +19,9 @@ Choices and deviations from the paper:
   (μ, σ, uncertainties) are therefore in physical units: v [m/s], ω [rad/s].
 - σ = softplus(raw) · action_std + ``sigma_floor`` (floor in physical units), so the NLL is
   bounded below and cannot diverge on near-duplicate teacher labels.
+- ``nll_beta`` = β > 0 (off by default) trains the MDN with the β-NLL of Seitzer et al.
+  (ICLR 2022): each frame's NLL weighted by its detached total variance^β (standardised
+  units, weights scaled to mean 1). Measured in docs/student.md; not used by the shipped MDNs.
 - The MLP's MSE is taken on standardised actions so that v and ω weigh equally.
 - Randomness: weights are initialised from a ``torch.Generator`` seeded by ``seed``; training
   shuffles with its own generator and runs dropout under a forked, seeded torch RNG, so neither
@@ -79,6 +82,7 @@ class StudentConfig(Config):
     n_components: int = 10  # K, mixture components (MDN only)
     sigma_floor: float = 1e-3  # [m/s | rad/s] added to every component std (MDN only)
     action_mode: str = "mode"  # deterministic action: "mode" | "mean" (see module docstring)
+    nll_beta: float = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -108,6 +112,10 @@ class StudentConfig(Config):
                 expect("StudentConfig.dropout", "a number in [0, 1)", self.dropout, "use 0.1")
             )
         check_nonnegative("StudentConfig", "sigma_floor", self.sigma_floor)
+        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
+            raise ConfigError(
+                expect("StudentConfig.nll_beta", "a number in [0, 1]", self.nll_beta, "use 0.5")
+            )
 
 
 # ---------------------------------------------------------------------------------- read-outs
@@ -248,8 +256,19 @@ class MDN(Student):
         return -self.log_prob(obs, actions).mean()
 
     def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """The training loss: :meth:`nll`."""
-        return self.nll(obs, actions)
+        """The training loss: :meth:`nll`, or with ``nll_beta`` = β > 0 the β-NLL."""
+        beta = float(self.config.nll_beta)
+        if beta == 0.0:
+            return self.nll(obs, actions)
+        logits, mu, sigma = self(obs)
+        z = (actions.unsqueeze(1) - mu) / sigma
+        comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
+        logp = torch.logsumexp(torch.log_softmax(logits, dim=-1) + comp, dim=-1)
+        with torch.no_grad():
+            ale, epi = uncertainty(logits, mu / self.act_std, sigma / self.act_std)
+            w = (ale + epi) ** beta
+            w = w / w.mean()
+        return -(w * logp).mean()
 
     def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
         """Mean of the most probable component (default) or the mixture mean, ``(N, 2)``."""
