@@ -957,19 +957,25 @@ def bench_deploy_memory(plan: Plan) -> dict[str, Any]:
 
 def _same_checkpoint(a: Path, b: Path) -> bool:
     """Equal tensors and equal metadata (parsed: safetensors writes the metadata map in no
-    fixed order, so the file bytes of equal checkpoints may differ)."""
+    fixed order, so the file bytes of equal checkpoints may differ). Configs are compared
+    with their defaults filled in, so an option added later (default = the old behaviour)
+    does not make a checkpoint written before it look different."""
     from safetensors import safe_open
+
+    from pioneer.learn.dagger import DaggerConfig
+    from pioneer.learn.models import StudentConfig
+
+    def meta(f: Any) -> dict[str, Any]:
+        m = {k: json.loads(v) if k in ("config", "info") else v for k, v in f.metadata().items()}
+        m["config"] = StudentConfig.from_dict(m["config"]).to_dict()
+        if isinstance(m.get("info"), dict) and "dagger" in m["info"]:
+            m["info"]["dagger"] = DaggerConfig.from_dict(m["info"]["dagger"]).to_dict()
+        return m
 
     with safe_open(str(a), framework="numpy") as fa, safe_open(str(b), framework="numpy") as fb:
         if set(fa.keys()) != set(fb.keys()):
             return False
-        meta_a = {
-            k: json.loads(v) if k in ("config", "info") else v for k, v in fa.metadata().items()
-        }
-        meta_b = {
-            k: json.loads(v) if k in ("config", "info") else v for k, v in fb.metadata().items()
-        }
-        return meta_a == meta_b and all(
+        return meta(fa) == meta(fb) and all(
             np.array_equal(fa.get_tensor(k), fb.get_tensor(k))
             for k in fa.keys()  # noqa: SIM118
         )
