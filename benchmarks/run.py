@@ -67,6 +67,7 @@ from pioneer.sim import (
     scan,
     step,
 )
+from pioneer.sim.env import NavEnv
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -194,8 +195,9 @@ def elevator_setup(seed: int) -> tuple[Any, Any, State]:
     return scenario, world, state
 
 
-def seeded_actions(space: gym.spaces.Box, n: int, seed: int) -> np.ndarray:
+def seeded_actions(space: gym.spaces.Space[Any], n: int, seed: int) -> np.ndarray:
     """A fixed action sequence drawn uniformly from the action box, shape ``(n, 2)``."""
+    assert isinstance(space, gym.spaces.Box), f"expected a Box action space, got {space}"
     rng = np.random.default_rng(seed)
     return rng.uniform(space.low, space.high, size=(n, 2)).astype(np.float32)
 
@@ -253,6 +255,7 @@ def _env_breakdown(plan: Plan) -> dict[str, Any]:
     """µs per call of the pieces of one env step (B = 1), to locate Python overhead."""
     n = plan.breakdown_calls
     env = gym.make(ENV_ID).unwrapped
+    assert isinstance(env, NavEnv), f"expected {ENV_ID} to be a NavEnv, got {type(env)}"
     env.reset(seed=SEED)
     world = env.world
     s0: State = env.state
