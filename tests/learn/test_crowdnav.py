@@ -21,6 +21,7 @@ from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import PolicySpec, evaluate
 from pioneer.learn import crowdnav_bc
 from pioneer.learn.crowdnav import (
+    CHECKPOINT_FORMAT,
     CrowdNavConfig,
     CrowdNavNet,
     CrowdNavPolicy,
@@ -257,6 +258,32 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     assert_house_message(str(e.value))
     with pytest.raises(DataError):
         shipped_weights("static")
+
+
+def test_checkpoint_with_foreign_or_non_finite_tensors_is_refused(tmp_path):
+    from safetensors.torch import load_file, save_file
+
+    net = CrowdNavNet(CrowdNavConfig(max_humans=3, embed=16, hidden=8), seed=5)
+    p = save_crowdnav(net, tmp_path / "w.safetensors")
+    meta = read_crowdnav_meta(p)
+    raw = {"format": CHECKPOINT_FORMAT, "config": json.dumps(meta["config"])}
+    tensors = load_file(str(p))
+    # Weights of a wider network under this config: the error names the mis-shaped tensors.
+    wide = CrowdNavNet(CrowdNavConfig(max_humans=3, embed=32, hidden=8), seed=5)
+    save_file(
+        {k: v.contiguous() for k, v in wide.state_dict().items()},
+        str(tmp_path / "wide.st"),
+        metadata=raw,
+    )
+    with pytest.raises(DataError) as e:
+        load_crowdnav(tmp_path / "wide.st")
+    assert_house_message(str(e.value), "tensors", "shape")
+    name = next(iter(tensors))
+    tensors[name].view(-1)[0] = float("nan")
+    save_file(tensors, str(tmp_path / "nan.st"), metadata=raw)
+    with pytest.raises(DataError) as e:
+        load_crowdnav(tmp_path / "nan.st")
+    assert_house_message(str(e.value), name, "finite float32")
 
 
 def test_policy_is_deterministic_and_registered():

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 from torch import nn
@@ -15,7 +15,9 @@ from torch import nn
 from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path
 
-__all__ = ["read_checkpoint", "write_checkpoint"]
+__all__ = ["load_checked", "read_checkpoint", "write_checkpoint"]
+
+M = TypeVar("M", bound=nn.Module)
 
 
 def write_checkpoint(
@@ -71,3 +73,33 @@ def read_checkpoint(
     except (KeyError, json.JSONDecodeError) as exc:
         raise DataError(expect(f"{p}: metadata", "JSON 'config'", "missing/invalid", fix)) from exc
     return meta, arrays
+
+
+def load_checked(
+    model: M, arrays: Mapping[str, torch.Tensor], p: Path, built_from: str, fix: str
+) -> M:
+    """Load ``arrays`` into ``model`` (built from the checkpoint's config, described by
+    ``built_from``) and return it in eval mode, after checking that the tensors are exactly the
+    model's (names and shapes) and finite float32; otherwise one :class:`DataError` listing the
+    missing, unexpected and mis-shaped tensors, or the first bad one."""
+    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+    received = {k: tuple(v.shape) for k, v in arrays.items()}
+    if expected != received:
+        diff = {
+            "missing": sorted(set(expected) - set(received)),
+            "unexpected": sorted(set(received) - set(expected)),
+            "shape": sorted(k for k in set(expected) & set(received) if expected[k] != received[k]),
+        }
+        raise DataError(
+            expect(
+                f"{p}: tensors",
+                f"those of {built_from}",
+                diff,
+                f"the weights do not match the stored config; {fix}",
+            )
+        )
+    for k, v in arrays.items():
+        if v.dtype != torch.float32 or not bool(torch.isfinite(v).all()):
+            raise DataError(expect(f"{p}: {k}", "finite float32", str(v.dtype), fix))
+    model.load_state_dict(dict(arrays), strict=True)
+    return model.eval()

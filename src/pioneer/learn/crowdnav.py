@@ -76,7 +76,7 @@ from torch import nn
 from pioneer.config import Config, check_positive
 from pioneer.control.policy import register_policy
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.learn.checkpoint import read_checkpoint, write_checkpoint
+from pioneer.learn.checkpoint import load_checked, read_checkpoint, write_checkpoint
 from pioneer.learn.models import _linear
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
@@ -344,17 +344,9 @@ def load_crowdnav(path: str | Path) -> CrowdNavNet:
         raise DataError(
             expect(f"{p}: config", "a valid CrowdNavConfig", str(exc), "re-train or re-save")
         ) from exc
-    model = CrowdNavNet(cfg)
-    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-    received = {k: tuple(v.shape) for k, v in arrays.items()}
-    if expected != received or any(not bool(torch.isfinite(v).all()) for v in arrays.values()):
-        raise DataError(
-            expect(
-                f"{p}: tensors", "finite tensors matching the stored config", "mismatch", "re-train"
-            )
-        )
-    model.load_state_dict(arrays, strict=True)
-    return model.eval()
+    return load_checked(
+        CrowdNavNet(cfg), arrays, p, f"CrowdNav++ {cfg.to_dict()}", "re-train or re-save it"
+    )
 
 
 def shipped_weights(scenario: str) -> Path:

@@ -45,7 +45,7 @@ from torch import nn
 from pioneer.config import Config, check_nonnegative
 from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.learn.checkpoint import read_checkpoint, write_checkpoint
+from pioneer.learn.checkpoint import load_checked, read_checkpoint, write_checkpoint
 from pioneer.sim.lidar import OBS_DIM
 
 __all__ = [
@@ -428,28 +428,6 @@ def load_student(path: str | Path) -> MDN | MLPStudent:
         raise DataError(
             expect(f"{p}: config", "a valid StudentConfig", str(exc), "re-save the checkpoint")
         ) from exc
-    model = build_student(cfg)
-    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-    received = {k: tuple(v.shape) for k, v in arrays.items()}
-    if expected != received:
-        diff = {
-            "missing": sorted(set(expected) - set(received)),
-            "unexpected": sorted(set(received) - set(expected)),
-            "shape": sorted(k for k in set(expected) & set(received) if expected[k] != received[k]),
-        }
-        raise DataError(
-            expect(
-                f"{p}: tensors",
-                f"those of {cfg.kind} {cfg.to_dict()}",
-                diff,
-                "the weights do not match the stored config; re-save the checkpoint",
-            )
-        )
-    for k, v in arrays.items():
-        if v.dtype != torch.float32 or not bool(torch.isfinite(v).all()):
-            raise DataError(
-                expect(f"{p}: {k}", "finite float32", str(v.dtype), "re-train or re-save")
-            )
-    model.load_state_dict(arrays, strict=True)
-    model.eval()
-    return model
+    return load_checked(
+        build_student(cfg), arrays, p, f"{cfg.kind} {cfg.to_dict()}", "re-train or re-save it"
+    )
