@@ -971,6 +971,7 @@ def _same_checkpoint(a: Path, b: Path) -> bool:
     def meta(f: Any) -> dict[str, Any]:
         m = {k: json.loads(v) if k in ("config", "info") else v for k, v in f.metadata().items()}
         m["config"] = StudentConfig.from_dict(m["config"]).to_dict()
+        m.pop("torch_cpu_capability", None)  # where it was made, not what it is
         if isinstance(m.get("info"), dict) and "dagger" in m["info"]:
             m["info"]["dagger"] = DaggerConfig.from_dict(m["info"]["dagger"]).to_dict()
         return m
@@ -982,6 +983,17 @@ def _same_checkpoint(a: Path, b: Path) -> bool:
             np.array_equal(fa.get_tensor(k), fb.get_tensor(k))
             for k in fa.keys()  # noqa: SIM118
         )
+
+
+def _torch_cpu_capability() -> str:
+    """torch's kernel family on this CPU (e.g. "AVX2", "AVX512"), from a fresh interpreter."""
+    out = subprocess.run(
+        [sys.executable, "-c", "import torch; print(torch.backends.cpu.get_cpu_capability())"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    return out.stdout.strip() or "unknown"
 
 
 def bench_dagger_run(plan: Plan) -> dict[str, Any]:
@@ -1021,8 +1033,10 @@ def bench_dagger_run(plan: Plan) -> dict[str, Any]:
             "episodes": 550,
             "workers": 2,
             "last_round": curves[-1],
-            # the shipped student was made by this very command: a fresh run must match it
+            # the shipped student was made by this very command: a fresh run matches it bit for
+            # bit on a CPU where torch picks the same kernels (compare the two capabilities)
             "same_weights_as_shipped": same,
+            "torch_cpu_capability": _torch_cpu_capability(),
         },
     }
 

@@ -344,6 +344,10 @@ def test_checkpoint_round_trip_is_exact(tmp_path, trained_pair, which):
     assert meta["info"] == {"epochs": 3} and meta["config"]["kind"] == model.kind
     assert b"pickle" not in path.read_bytes()[:16]
     assert not list(tmp_path.glob(".s.safetensors*"))  # no temporary file left behind
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="pt") as fh:  # where the weights were made
+        assert fh.metadata()["torch_cpu_capability"] == torch.backends.cpu.get_cpu_capability()
 
 
 def test_corrupt_or_mismatched_checkpoints_are_refused(tmp_path, trained_pair):

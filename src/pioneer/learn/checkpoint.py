@@ -37,6 +37,9 @@ def write_checkpoint(
         "config": json.dumps(dict(config)),
         "info": json.dumps(dict(info or {})),
         "torch": torch.__version__,
+        # The kernels torch picked on this CPU: float results, hence trained weights and the
+        # rollouts that follow them, match bit for bit only between machines where it agrees.
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
     }
     target = Path(path)
     with atomic_path(target) as tmp:
