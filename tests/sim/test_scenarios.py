@@ -330,3 +330,37 @@ def test_scenario_config_round_trips_through_dict():
             sample_state(cfg, np.random.default_rng(3)),
             sample_state(again, np.random.default_rng(3)),
         )
+
+
+# ------------------------------------------------------------------ user-registered variants
+def test_a_registered_variant_is_reachable_by_name_and_runs(monkeypatch):
+    from pioneer.sim import scenarios as sc
+    from pioneer.sim.env import NavEnv
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))  # leave no trace for other tests
+    deep = ElevatorLayout(lobby_depth=2.8)
+    sc.register_scenario("hr-rl-deep", lambda: elevator_scenario(deep, name="hr-rl-deep"))
+    assert "hr-rl-deep" in sc.scenario_names()
+    cfg = sc.get_scenario("HR-RL-Deep ")
+    assert cfg.name == "hr-rl-deep" and cfg.bounds[2] == pytest.approx(-2.8)
+    rng = np.random.default_rng(3)
+    start_y = [sample_state(cfg, rng).robot[0, 1] for _ in range(20)]
+    assert min(start_y) < -1.3  # beyond the default lobby's far side: the variant is in use
+    env = NavEnv("hr-rl-deep")
+    obs, info = env.reset(seed=1)
+    for _ in range(5):
+        obs, _, _, _, info = env.step(np.array([0.3, 0.0], dtype=np.float32))
+    assert obs.shape == (29,) and info["event"] is None
+
+
+def test_registering_a_builtin_name_or_a_non_scenario_is_refused(monkeypatch):
+    from pioneer.sim import scenarios as sc
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    with pytest.raises(ScenarioError) as err:
+        sc.register_scenario("hr-rl", lambda: elevator_scenario())
+    assert_house_message(str(err.value), "hr-rl", "rename")
+    with pytest.raises(ScenarioError) as err:
+        sc.register_scenario("odd", lambda: ElevatorLayout())  # type: ignore[arg-type, return-value]
+    assert_house_message(str(err.value), "ScenarioConfig", "ElevatorLayout")
+    assert "odd" not in sc.scenario_names()

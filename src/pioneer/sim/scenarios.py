@@ -28,6 +28,7 @@ __all__ = [
     "StaticStudyLayout",
     "elevator_scenario",
     "get_scenario",
+    "register_scenario",
     "sample_state",
     "scenario_names",
     "static_study_scenario",
@@ -401,11 +402,39 @@ _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
     ),
     "static": static_study_scenario,
 }
+_BUILTIN = frozenset(_REGISTRY)
 
 
 def scenario_names() -> list[str]:
     """Names accepted by :func:`get_scenario`."""
     return sorted(_REGISTRY)
+
+
+def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
+    """Make a scenario variant available by ``name`` to :func:`get_scenario`, the Gymnasium
+    env, the evaluation harness and DAgger (in-process; register it at import time of the
+    script's top level, so spawned workers register it too).
+
+    ``factory`` builds the config, e.g. ``lambda: elevator_scenario(ElevatorLayout(
+    lobby_depth=2.8), name="hr-rl-deep")``; it is called once here to check it. Built-in names
+    cannot be replaced. Learned parts keyed by scenario (the teacher's default reward, shipped
+    students) exist only for the built-in ones: pass a reward file for a new name.
+    """
+    key = name.strip().lower()
+    if not key or key in _BUILTIN:
+        raise ScenarioError(
+            expect(
+                "scenario name", f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it"
+            )
+        )
+    cfg = factory()
+    if not isinstance(cfg, ScenarioConfig):
+        raise ScenarioError(
+            expect(
+                f"scenario {name!r} factory", "a ScenarioConfig", type(cfg).__name__, "return one"
+            )
+        )
+    _REGISTRY[key] = factory
 
 
 def get_scenario(name: str) -> ScenarioConfig:
