@@ -985,15 +985,12 @@ def _same_checkpoint(a: Path, b: Path) -> bool:
         )
 
 
-def _torch_cpu_capability() -> str:
-    """torch's kernel family on this CPU (e.g. "AVX2", "AVX512"), from a fresh interpreter."""
-    out = subprocess.run(
-        [sys.executable, "-c", "import torch; print(torch.backends.cpu.get_cpu_capability())"],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    return out.stdout.strip() or "unknown"
+def _torch_cpu_capability(checkpoint: Path) -> str:
+    """torch's kernel family (e.g. "AVX2") where ``checkpoint`` was written (its metadata)."""
+    from safetensors import safe_open
+
+    with safe_open(str(checkpoint), framework="numpy") as f:
+        return str((f.metadata() or {}).get("torch_cpu_capability", "unknown"))
 
 
 def bench_dagger_run(plan: Plan) -> dict[str, Any]:
@@ -1023,10 +1020,11 @@ def bench_dagger_run(plan: Plan) -> dict[str, Any]:
         if proc.returncode != 0:
             raise RuntimeError(f"distill failed: {proc.stderr[-2000:]}")
         curves = (Path(tmp) / "dagger" / "curves.csv").read_text().splitlines()
+        fresh = Path(tmp) / "dagger" / "student.safetensors"
         same = _same_checkpoint(
-            Path(tmp) / "dagger" / "student.safetensors",
-            REPO / "src" / "pioneer" / "data" / "students" / f"{SCENARIO}-mdn.safetensors",
+            fresh, REPO / "src" / "pioneer" / "data" / "students" / f"{SCENARIO}-mdn.safetensors"
         )
+        capability = _torch_cpu_capability(fresh)
     return {
         "metrics": {"minutes_full_run": metric([wall / 60], "min", ("<=", 15.0))},
         "info": {
@@ -1036,7 +1034,7 @@ def bench_dagger_run(plan: Plan) -> dict[str, Any]:
             # the shipped student was made by this very command: a fresh run matches it bit for
             # bit on a CPU where torch picks the same kernels (compare the two capabilities)
             "same_weights_as_shipped": same,
-            "torch_cpu_capability": _torch_cpu_capability(),
+            "torch_cpu_capability": capability,
         },
     }
 

@@ -405,6 +405,11 @@ _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
 _BUILTIN = frozenset(_REGISTRY)
 
 
+def _key(name: str) -> str:
+    """Registry key of a scenario name (case and surrounding blanks do not matter)."""
+    return name.strip().lower()
+
+
 def scenario_names() -> list[str]:
     """Names accepted by :func:`get_scenario`."""
     return sorted(_REGISTRY)
@@ -420,7 +425,7 @@ def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
     cannot be replaced. Learned parts keyed by scenario (the teacher's default reward, shipped
     students) exist only for the built-in ones: pass a reward file for a new name.
     """
-    key = name.strip().lower()
+    key = _key(name)
     if not key or key in _BUILTIN:
         raise ScenarioError(
             expect(
@@ -439,7 +444,7 @@ def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
 
 def get_scenario(name: str) -> ScenarioConfig:
     """A registered scenario by name (``hr-rl``, ``hl-rr``, ``static``, …)."""
-    key = name.strip().lower()
+    key = _key(name)
     if key not in _REGISTRY:
         raise ScenarioError(
             expect("scenario", f"one of {scenario_names()}", name, "pick a listed scenario name")
