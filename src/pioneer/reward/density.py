@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, load_npz
+from pioneer.reward.fastexp import exp_shifted_inplace
 from pioneer.reward.kernels import leverage_factor, sq_dists
 
 __all__ = ["DensityConfig", "DensityReward", "farthest_point_indices", "kmeans_medoid_indices"]
@@ -171,7 +172,7 @@ class DensityReward:
         self.info_: dict[str, Any] = {}
         self._w: F64 | None = None  # α_i · g² · cos(π/2 (1 − γ̃_i)), for evaluation
         self._u32: NDArray[np.float32] | None = None  # (D, N_U) −2c uᵀ
-        self._cu2: NDArray[np.float32] | None = None  # (1, N_U) c ‖u‖²
+        self._cu2: NDArray[np.float32] | None = None  # (N_U,) c ‖u‖²
         self._w32: NDArray[np.float32] | None = None
 
     # ---------------------------------------------------------------------------- fitting
@@ -246,8 +247,9 @@ class DensityReward:
                     "use the training feature map",
                 )
             )
-        # float32 evaluation (numpy vectorises float32 exp; relative error ~1e-6), with the
-        # kernel's −1/(2l²) folded into cached inducing terms: c‖z−u‖² = c‖z‖² + c‖u‖² − 2c z·u.
+        # float32 evaluation (relative error ~1e-6), with the kernel's −1/(2l²) folded into
+        # cached inducing terms: c‖z−u‖² = c‖z‖² + c‖u‖² − 2c z·u. The exponential is the
+        # SIMD kernel of pioneer.reward.fastexp (≤ 1e−7 relative error, 2× numpy's on AVX2).
         zs = ((z - self.mean_) / self.std_).astype(np.float32)
         u_scaled, cu2, w32 = self._eval_cache()
         c = np.float32(-0.5 / (self.length_**2))
@@ -255,9 +257,8 @@ class DensityReward:
         for s in range(0, zs.shape[0], _CHUNK):
             q = zs[s : s + _CHUNK]
             k = q @ u_scaled  # (M, N_U): −2c z·u
-            k += (c * np.einsum("ij,ij->i", q, q))[:, None]
-            k += cu2  # = c‖z−u‖² ≤ 0 up to round-off (exp of ~1e-6 is harmless: no clamp)
-            np.exp(k, out=k)
+            # k ← exp(k + c‖z‖² + c‖u‖²) = exp(c‖z−u‖²); the argument is ≤ 0 up to round-off
+            exp_shifted_inplace(k, c * np.einsum("ij,ij->i", q, q), cu2)
             out[s : s + _CHUNK] = k @ w32
         return out
 
@@ -267,7 +268,7 @@ class DensityReward:
             u = self.inducing_.astype(np.float32)
             c = np.float32(-0.5 / (self.length_**2))
             self._u32 = np.ascontiguousarray((-2.0 * c) * u.T)
-            self._cu2 = (c * np.einsum("ij,ij->i", u, u))[None, :]
+            self._cu2 = c * np.einsum("ij,ij->i", u, u)
             self._w32 = self._w.astype(np.float32)
         return self._u32, self._cu2, self._w32
 
