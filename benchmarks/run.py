@@ -1121,6 +1121,12 @@ def machine_info() -> dict[str, Any]:
                 cpu_model = line.split(":", 1)[1].strip()
                 break
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    # What numba compiles for: the SIMD width decides how fast the vectorised kernels run
+    # (cast_rays, the density reward's exp), so results from different hosts differ.
+    import llvmlite.binding as llvm
+
+    features = llvm.get_host_cpu_features()
+    simd = [f for f in ("sse4.2", "avx", "avx2", "fma", "avx512f") if features.get(f, False)]
 
     def _version(dist: str) -> str | None:
         try:
@@ -1132,6 +1138,8 @@ def machine_info() -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "cpu_affinity": affinity,
         "cpu_model": cpu_model,
+        "llvm_host_cpu": llvm.get_host_cpu_name(),
+        "simd": simd,
         "platform": platform.platform(),
         "machine": platform.machine(),
         "python": platform.python_version(),

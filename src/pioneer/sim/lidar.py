@@ -156,7 +156,7 @@ def cast_rays(
             cc = wx * wx + wy * wy - r * r
             if cc <= 0.0:  # the sensor is inside the circle: every beam reads 0
                 for b in range(n_beams):
-                    acc[b] = 0.0 if 0.0 < acc[b] else acc[b]
+                    acc[b] = 0.0 if acc[b] > 0.0 else acc[b]
                 continue
             for b in range(n_beams):
                 bb = wx * dirx[b] + wy * diry[b]
@@ -259,27 +259,40 @@ def resample_scan(
         r = r[::-1]
         angle_min = angle_min + angle_increment * (r.size - 1)
         angle_increment = -angle_increment
-    cap = cfg.max_range
-    no_return = np.isposinf(r) | (np.isfinite(r) & (r > range_max))
-    valid = (np.isfinite(r) & (r >= range_min)) | no_return
-    vals = np.where(no_return, cap, np.minimum(np.where(np.isfinite(r), r, cap), cap))
     tol = max(np.pi / cfg.n_beams, 0.5 * angle_increment) + 1e-9
     return _resample_kernel(
-        np.ascontiguousarray(vals), valid, angle_min, angle_increment, cfg.n_beams, tol, cap
+        np.ascontiguousarray(r),
+        float(range_min),
+        float(range_max),
+        angle_min,
+        angle_increment,
+        cfg.n_beams,
+        tol,
+        cfg.max_range,
     )
 
 
 @njit(cache=True)
 def _resample_kernel(
-    vals: NDArray[np.float64],
-    valid: NDArray[np.bool_],
+    r: NDArray[np.float64],
+    range_min: float,
+    range_max: float,
     amin: float,
     inc: float,
     n_target: int,
     tol: float,
     cap: float,
 ) -> NDArray[np.float64]:
-    n = vals.shape[0]
+    n = r.shape[0]
+    # Classify the source beams (in the kernel: a dozen numpy calls on 360 beams cost ~30 µs).
+    vals = np.empty(n)
+    valid = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        x = r[i]
+        finite = math.isfinite(x)
+        no_return = x == math.inf or (finite and x > range_max)
+        valid[i] = (finite and x >= range_min) or no_return
+        vals[i] = cap if (no_return or not finite) else min(x, cap)
     period = 2.0 * math.pi / inc
     w = math.ceil(tol / inc) + 1
     out = np.full(n_target, cap)
