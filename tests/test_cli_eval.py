@@ -22,6 +22,17 @@ def _one_error_line(err: str) -> str:
     return lines[0]
 
 
+def _pioneer(*argv: str) -> subprocess.CompletedProcess[str]:
+    """The CLI in a fresh interpreter (exit code and stderr as a user sees them)."""
+    return subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+
+
 def _eval_argv(out, *extra):
     return ["eval", "--scenario", "static", "--out", str(out), "--workers", "1", *extra]
 
@@ -51,13 +62,7 @@ def test_run_no_density_names_the_ablation_and_matches_a_direct_run(capsys):
 
 
 def test_run_unknown_policy_exits_2_with_one_line():
-    proc = subprocess.run(
-        [sys.executable, "-m", "pioneer.cli", "run", "--policy", "nope"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    proc = _pioneer("run", "--policy", "nope")
     assert proc.returncode == 2
     line = _one_error_line(proc.stderr)
     assert "policy" in line and "nope" in line and "teacher" in line  # lists the choices
@@ -159,3 +164,61 @@ def test_eval_on_a_corrupt_records_file_exits_2_naming_the_line(tmp_path, capsys
     assert "{not json}" in line
     assert captured.out == ""
     assert path.read_text() == corrupt
+
+
+# --------------------------------------------------------------------------------------------
+# pioneer --scenarios FILE: scenario variants reach the spawned evaluation workers
+
+_VARIANTS = {
+    "format": "pioneer.scenarios/1",
+    "scenarios": {
+        "static-short": {"static": {"width": 5.0}, "sim": {"time_limit": 3.0}},
+        "hr-rl-wide": {
+            "elevator": {"lobby_width": 5.0},
+            "sim": {"time_limit": 2.0},
+            "base": "hr-rl",
+        },
+    },
+}
+
+
+@pytest.fixture
+def variant_file(tmp_path, monkeypatch):
+    from pioneer.sim import scenarios as sc
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
+    monkeypatch.setattr(sc, "_ENV_LOADED", None)
+    monkeypatch.setenv(sc.SCENARIOS_ENV, "")  # main() appends to it; restored afterwards
+    path = tmp_path / "variants.json"
+    path.write_text(json.dumps(_VARIANTS))
+    return path
+
+
+def test_scenarios_option_runs_a_variant_in_two_worker_processes(variant_file, tmp_path):
+    out = tmp_path / "ev"
+    argv = ["--scenarios", str(variant_file), "eval", "--scenario", "static-short"]
+    argv += ["--policy", "goal", "--seeds", "1", "--trials", "4", "--out", str(out)]
+    assert main([*argv, "--workers", "2"]) == 0
+    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    assert len(recs) == 4 and {r["scenario"] for r in recs} == {"static-short"}
+    assert all(r["time_s"] <= 3.0 + 1e-9 for r in recs)  # the variant's time limit, not 30 s
+
+
+def test_a_variant_with_a_base_runs_the_shipped_student_in_workers(variant_file, tmp_path):
+    out = tmp_path / "ev"
+    argv = ["--scenarios", str(variant_file), "eval", "--scenario", "hr-rl-wide"]
+    argv += ["--policy", "student-mlp", "--seeds", "1", "--trials", "2", "--out", str(out)]
+    assert main([*argv, "--workers", "2"]) == 0
+    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    assert [r["policy"] for r in recs] == ["student-mlp"] * 2
+    assert all(r["time_s"] <= 2.0 + 1e-9 for r in recs)
+
+
+def test_scenarios_option_with_a_bad_file_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "pioneer.scenarios/1", "scenarios": {"x": {"elevator": {"d": 1}}}}')
+    proc = _pioneer("--scenarios", str(bad), "run", "--scenario", "x")
+    assert proc.returncode == 2
+    line = _one_error_line(proc.stderr)
+    assert "bad.json" in line and "'d'" in line

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -312,6 +313,14 @@ def _cmd_train_crowdnav(args: argparse.Namespace) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pioneer", description="PioneeR social navigation toolkit")
+    p.add_argument(
+        "--scenarios",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="register the scenario variants of a JSON file (format pioneer.scenarios/1, see "
+        "docs/simulator.md) for the command; repeatable; same as listing it in PIONEER_SCENARIOS",
+    )
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run one episode of a policy; optionally write a GIF/PNG")
     r.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, static, hr-rl-r03, …")
@@ -477,11 +486,25 @@ def _single_threaded_blas() -> None:
     threadpool_limits(1, user_api="blas")
 
 
+def _register_scenario_files(files: Sequence[str]) -> None:
+    """Load ``--scenarios`` files here (a bad file fails before any work) and add them to
+    ``PIONEER_SCENARIOS``, which spawned worker processes inherit and load on demand."""
+    from pioneer.sim.scenarios import SCENARIOS_ENV, load_scenario_file
+
+    for f in files:
+        load_scenario_file(f)
+    if files:
+        paths = [str(Path(f).resolve()) for f in files]
+        old = os.environ.get(SCENARIOS_ENV, "")
+        os.environ[SCENARIOS_ENV] = os.pathsep.join([*filter(None, [old]), *paths])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pioneer`` console script."""
     args = _parser().parse_args(argv)
     _single_threaded_blas()
     try:
+        _register_scenario_files(args.scenarios)
         return int(args.func(args))
     except PioneerError as exc:
         print(f"pioneer: error: {exc}", file=sys.stderr)

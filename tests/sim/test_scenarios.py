@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pioneer.errors import ConfigError, ScenarioError
+from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.sim import (
     ARRIVED,
     WALKING,
@@ -364,3 +365,143 @@ def test_registering_a_builtin_name_or_a_non_scenario_is_refused(monkeypatch):
         sc.register_scenario("odd", lambda: ElevatorLayout())  # type: ignore[arg-type, return-value]
     assert_house_message(str(err.value), "ScenarioConfig", "ElevatorLayout")
     assert "odd" not in sc.scenario_names()
+
+
+# --------------------------------------------------------------------------------------------
+# Scenario files (pioneer.scenarios/1) and PIONEER_SCENARIOS
+
+VARIANTS = {
+    "format": "pioneer.scenarios/1",
+    "scenarios": {
+        "hr-rl-deep": {"elevator": {"human_side": "right", "lobby_depth": 2.8}},
+        "static-wide": {"static": {"width": 5.0}, "sim": {"time_limit": 40.0}},
+    },
+}
+
+
+@pytest.fixture
+def clean_registry(monkeypatch):
+    """Scenario registry and PIONEER_SCENARIOS restored after the test."""
+    from pioneer.sim import scenarios as sc
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
+    monkeypatch.setattr(sc, "_ENV_LOADED", None)
+    monkeypatch.delenv(sc.SCENARIOS_ENV, raising=False)
+    return sc
+
+
+def _write(tmp_path, data, name="variants.json"):
+    path = tmp_path / name
+    path.write_text(data if isinstance(data, str) else json.dumps(data))
+    return path
+
+
+def test_scenario_file_registers_its_variants(clean_registry, tmp_path):
+    sc = clean_registry
+    names = sc.load_scenario_file(_write(tmp_path, VARIANTS))
+    assert names == ["hr-rl-deep", "static-wide"]
+    deep = sc.get_scenario("hr-rl-deep")
+    want = elevator_scenario(ElevatorLayout(lobby_depth=2.8)).replace(name="hr-rl-deep")
+    assert deep == want
+    wide = sc.get_scenario("static-wide")
+    assert wide.name == "static-wide" and wide.sim.time_limit == 40.0
+    assert wide.bounds[1] - wide.bounds[0] == pytest.approx(5.0)
+    assert get_scenario("static").sim.time_limit != 40.0  # the built-in is untouched
+
+
+def test_environment_variable_loads_files_on_demand(clean_registry, tmp_path, monkeypatch):
+    sc = clean_registry
+    monkeypatch.setenv(sc.SCENARIOS_ENV, str(_write(tmp_path, VARIANTS)))
+    assert "static-wide" in sc.scenario_names()
+    assert sc.get_scenario("hr-rl-deep").bounds[2] == pytest.approx(-2.8)
+
+
+@pytest.mark.parametrize(
+    ("content", "needles"),
+    [
+        ("{not json", ("valid JSON",)),
+        ({"format": "other", "scenarios": {}}, ("pioneer.scenarios/1",)),
+        ({"format": "pioneer.scenarios/1", "scenarios": {}}, ("non-empty",)),
+        (
+            {"format": "pioneer.scenarios/1", "scenarios": {"x": {"lobby": {}}}},
+            ("exactly one of", "lobby"),
+        ),
+        (
+            {"format": "pioneer.scenarios/1", "scenarios": {"x": {"elevator": {}, "static": {}}}},
+            ("exactly one of",),
+        ),
+        (
+            {"format": "pioneer.scenarios/1", "scenarios": {"x": {"elevator": {"depth": 2}}}},
+            ("'x'", "depth", "misspelled"),
+        ),
+        (
+            {
+                "format": "pioneer.scenarios/1",
+                "scenarios": {"x": {"elevator": {"lobby_depth": -1}}},
+            },
+            ("'x'", "lobby_depth"),
+        ),
+        (
+            {"format": "pioneer.scenarios/1", "scenarios": {"hr-rl": {"elevator": {}}}},
+            ("hr-rl", "rename"),
+        ),
+        (
+            {"format": "pioneer.scenarios/1", "scenarios": {"x": {"elevator": {}, "base": "hq"}}},
+            ("'x'", "base", "hq"),
+        ),
+    ],
+)
+def test_bad_scenario_files_are_refused_with_a_house_message(
+    clean_registry, tmp_path, content, needles
+):
+    sc = clean_registry
+    before = sc.scenario_names()
+    with pytest.raises(ScenarioError) as err:
+        sc.load_scenario_file(_write(tmp_path, content))
+    assert_house_message(str(err.value), *needles)
+    assert sc.scenario_names() == before
+
+
+def test_a_bad_entry_registers_nothing_and_a_missing_file_is_named(clean_registry, tmp_path):
+    sc = clean_registry
+    data = {
+        "format": "pioneer.scenarios/1",
+        "scenarios": {"good": {"elevator": {}}, "bad": {"elevator": {"door_width": 9.0}}},
+    }
+    with pytest.raises(ScenarioError):
+        sc.load_scenario_file(_write(tmp_path, data))
+    assert "good" not in sc.scenario_names()  # all or nothing
+    data["scenarios"] = {"short": {"static": {"length": 5.0}}}  # start row 0.1 m off the wall
+    with pytest.raises(ScenarioError) as err:
+        sc.load_scenario_file(_write(tmp_path, data))
+    assert_house_message(str(err.value), "variants.json", "'short'", "robot_start")
+    with pytest.raises(ScenarioError) as err:
+        sc.load_scenario_file(tmp_path / "missing.json")
+    assert_house_message(str(err.value), "missing.json", "path")
+
+
+def test_a_variant_with_a_base_uses_the_shipped_demos_and_students_of_it(clean_registry, tmp_path):
+    from pioneer.control.teacher import default_features
+    from pioneer.data import base_scenario, shipped_demos, shipped_student
+
+    sc = clean_registry
+    data = {
+        "format": "pioneer.scenarios/1",
+        "scenarios": {
+            "deep": {"elevator": {"human_side": "left", "lobby_depth": 2.8}, "base": "HL-RR"},
+            "wide-room": {"static": {"width": 5.0}, "base": "static"},
+            "alone": {"elevator": {}},
+        },
+    }
+    sc.load_scenario_file(_write(tmp_path, data))
+    assert sc.scenario_base("deep") == "hl-rr" and base_scenario("deep") == "hl-rr"
+    assert shipped_student("deep", "mlp") == shipped_student("hl-rr", "mlp")
+    assert shipped_demos("wide-room") == shipped_demos("static")
+    assert default_features("wide-room") == "xy" and default_features("deep") == "obs_action"
+    assert sc.scenario_base("alone") == "alone" and base_scenario("hr-rl-r03") == "hr-rl"
+    with pytest.raises(DataError):
+        shipped_student("alone")
+    with pytest.raises(ScenarioError) as err:
+        sc.register_scenario("other", lambda: elevator_scenario(), base="deep")
+    assert_house_message(str(err.value), "base", "deep")

@@ -13,8 +13,12 @@ STUDENTS_DIR = Path(__file__).parent / "students"
 
 
 def base_scenario(scenario: str) -> str:
-    """The scenario whose shipped demos serve ``scenario`` (``hr-rl-r03`` → ``hr-rl``)."""
-    return scenario.removesuffix("-r03")
+    """The scenario whose shipped demos and students serve ``scenario``: ``hr-rl-r03`` →
+    ``hr-rl``, and a registered variant → the ``base`` it names (see
+    :func:`pioneer.sim.scenarios.scenario_base`)."""
+    from pioneer.sim.scenarios import scenario_base
+
+    return scenario_base(scenario).removesuffix("-r03")
 
 
 def shipped_demos(scenario: str) -> Path:
@@ -22,7 +26,14 @@ def shipped_demos(scenario: str) -> Path:
     p = DEMOS_DIR / f"{base_scenario(scenario)}.npz"
     if not p.is_file():
         names = sorted(q.stem for q in DEMOS_DIR.glob("*.npz"))
-        raise DataError(expect("shipped demos", f"one of {names}", scenario, "pass --demos FILE"))
+        raise DataError(
+            expect(
+                "shipped demos",
+                f"one of {names}",
+                scenario,
+                "pass your own demos/reward file, or give the variant a built-in 'base'",
+            )
+        )
     return p
 
 
@@ -36,7 +47,8 @@ def shipped_student(scenario: str, kind: str = "mdn") -> Path:
                 "shipped student",
                 f"one of {names}",
                 f"{scenario}-{kind}",
-                "train one with `pioneer distill` and pass checkpoint=PATH",
+                "train one with `pioneer distill` and pass checkpoint=PATH, or give the variant"
+                " a built-in 'base'",
             )
         )
     return p

@@ -10,17 +10,23 @@ width, cabin size, radii and the number of boarding/exiting humans are configura
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pioneer.config import Config, check_nonnegative, check_positive, check_range
-from pioneer.errors import ScenarioError, expect
+from pioneer.errors import PioneerError, ScenarioError, expect
 from pioneer.sim.humans import ARRIVED, WALKING
 from pioneer.sim.world import SimConfig, State, World
 
 __all__ = [
+    "SCENARIOS_ENV",
+    "SCENARIO_FILE_FORMAT",
     "ElevatorLayout",
     "HumanSpec",
     "Region",
@@ -28,8 +34,10 @@ __all__ = [
     "StaticStudyLayout",
     "elevator_scenario",
     "get_scenario",
+    "load_scenario_file",
     "register_scenario",
     "sample_state",
+    "scenario_base",
     "scenario_names",
     "static_study_scenario",
 ]
@@ -403,6 +411,7 @@ _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
     "static": static_study_scenario,
 }
 _BUILTIN = frozenset(_REGISTRY)
+_BASES: dict[str, str] = {}  # variant → built-in scenario whose learned parts it uses
 
 
 def _key(name: str) -> str:
@@ -412,10 +421,13 @@ def _key(name: str) -> str:
 
 def scenario_names() -> list[str]:
     """Names accepted by :func:`get_scenario`."""
+    _load_env_scenarios()
     return sorted(_REGISTRY)
 
 
-def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
+def register_scenario(
+    name: str, factory: Callable[[], ScenarioConfig], base: str | None = None
+) -> None:
     """Make a scenario variant available by ``name`` to :func:`get_scenario`, the Gymnasium
     env, the evaluation harness and DAgger (in-process; register it at import time of the
     script's top level, so spawned workers register it too).
@@ -423,9 +435,14 @@ def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
     ``factory`` builds the config, e.g. ``lambda: elevator_scenario(ElevatorLayout(
     lobby_depth=2.8), name="hr-rl-deep")``; it is called once here to check it. Built-in names
     cannot be replaced. Learned parts keyed by scenario (the teacher's default reward, shipped
-    students) exist only for the built-in ones: pass a reward file for a new name.
+    students) exist only for the built-in ones: pass a reward file for a new name, or name a
+    built-in ``base`` whose shipped demos and students the variant uses.
     """
     key = _key(name)
+    if base is not None and _key(base) not in _BUILTIN:
+        raise ScenarioError(
+            expect(f"scenario {name!r}: base", f"one of {sorted(_BUILTIN)}", base, "fix the name")
+        )
     if not key or key in _BUILTIN:
         raise ScenarioError(
             expect(
@@ -440,11 +457,138 @@ def register_scenario(name: str, factory: Callable[[], ScenarioConfig]) -> None:
             )
         )
     _REGISTRY[key] = factory
+    if base is None:
+        _BASES.pop(key, None)
+    else:
+        _BASES[key] = _key(base)
+
+
+def scenario_base(name: str) -> str:
+    """The built-in scenario whose learned parts (shipped demos → teacher reward, shipped
+    students) serve ``name``: the ``base`` it was registered with, else ``name`` itself."""
+    key = _key(name)
+    if key not in _REGISTRY:
+        _load_env_scenarios()
+    return _BASES.get(key, name)
+
+
+SCENARIO_FILE_FORMAT = "pioneer.scenarios/1"
+SCENARIOS_ENV = "PIONEER_SCENARIOS"  # scenario files (os.pathsep-separated) loaded on demand
+_KINDS: dict[str, tuple[type[Config], Callable[..., ScenarioConfig]]] = {
+    "elevator": (ElevatorLayout, elevator_scenario),
+    "static": (StaticStudyLayout, static_study_scenario),
+}
+_ENV_LOADED: str | None = None  # the value of SCENARIOS_ENV whose files are registered
+
+
+def _scenario_factory(
+    name: str, kind: str, layout: dict[str, Any], sim: dict[str, Any] | None
+) -> Callable[[], ScenarioConfig]:
+    layout_cls, build = _KINDS[kind]
+    lay = layout_cls.from_dict(layout)
+    sim_cfg = SimConfig.from_dict(sim) if sim is not None else None
+
+    def factory() -> ScenarioConfig:
+        return build(lay, sim=sim_cfg).replace(name=name)
+
+    return factory
+
+
+def load_scenario_file(path: str | Path) -> list[str]:
+    """Register the scenario variants of a JSON file; returns their names.
+
+    The file (``format`` ``pioneer.scenarios/1``) maps names to a layout of a built-in family
+    and, optionally, simulator settings::
+
+        {"format": "pioneer.scenarios/1",
+         "scenarios": {
+           "hr-rl-deep": {"elevator": {"lobby_depth": 2.8}, "base": "hr-rl"},
+           "static-wide": {"static": {"width": 5.0}, "sim": {"time_limit": 40.0}}}}
+
+    ``elevator`` takes :class:`ElevatorLayout` fields, ``static`` :class:`StaticStudyLayout`
+    fields, ``sim`` :class:`~pioneer.sim.world.SimConfig` fields; omitted fields keep their
+    defaults. An optional ``"base": "hr-rl"`` lets the variant use that built-in scenario's
+    shipped demos (the teacher's default reward) and shipped students. Episode seeds derive
+    from the scenario *name*, so a variant evaluated twice under one name gets the same
+    episodes. Put the file's path in the ``PIONEER_SCENARIOS``
+    environment variable (or pass ``pioneer --scenarios FILE``) so that worker processes
+    register the variants too.
+    """
+    p = Path(path)
+    fix = f"write a JSON object with 'format': {SCENARIO_FILE_FORMAT!r} and 'scenarios'"
+    try:
+        data = json.loads(p.read_text())
+    except OSError as exc:
+        raise ScenarioError(
+            expect("scenario file", "a readable file", str(p), "check the path")
+        ) from exc
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(
+            expect(f"scenario file {p}", "valid JSON", f"{exc.msg} at line {exc.lineno}", fix)
+        ) from exc
+    if not isinstance(data, dict) or data.get("format") != SCENARIO_FILE_FORMAT:
+        got = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise ScenarioError(expect(f"scenario file {p}: format", SCENARIO_FILE_FORMAT, got, fix))
+    entries = data.get("scenarios")
+    if not isinstance(entries, dict) or not entries:
+        raise ScenarioError(
+            expect(f"scenario file {p}: scenarios", "a non-empty object", entries, fix)
+        )
+    factories: dict[str, Callable[[], ScenarioConfig]] = {}
+    bases: dict[str, str | None] = {}
+    for name, entry in entries.items():
+        where = f"scenario file {p}: {name!r}"
+        if not _key(name) or _key(name) in _BUILTIN:
+            raise ScenarioError(
+                expect(where, f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it")
+            )
+        kinds = sorted(set(entry) & set(_KINDS)) if isinstance(entry, dict) else []
+        extra = (
+            sorted(set(entry) - set(_KINDS) - {"sim", "base"}) if isinstance(entry, dict) else []
+        )
+        if len(kinds) != 1 or extra:
+            raise ScenarioError(
+                expect(
+                    where,
+                    f"exactly one of {sorted(_KINDS)} (plus optional 'sim' and 'base')",
+                    sorted(entry) if isinstance(entry, dict) else entry,
+                    'e.g. {"elevator": {"lobby_depth": 2.8}}',
+                )
+            )
+        try:
+            factories[name] = _scenario_factory(name, kinds[0], entry[kinds[0]], entry.get("sim"))
+            factories[name]()  # build it once: placement errors name the file and the variant
+        except PioneerError as exc:
+            raise ScenarioError(f"{where}: {exc}") from exc
+        base = entry.get("base")
+        if base is not None and (not isinstance(base, str) or _key(base) not in _BUILTIN):
+            raise ScenarioError(
+                expect(f"{where}: base", f"one of {sorted(_BUILTIN)}", base, "fix the name")
+            )
+        bases[name] = base
+    for name, factory in factories.items():  # all or nothing: register only a valid file
+        register_scenario(name, factory, base=bases[name])
+    return list(factories)
+
+
+def _load_env_scenarios() -> None:
+    """Register the files named in ``PIONEER_SCENARIOS`` (once per value of the variable)."""
+    global _ENV_LOADED
+    value = os.environ.get(SCENARIOS_ENV, "")
+    if value == _ENV_LOADED:
+        return
+    for item in value.split(os.pathsep):
+        if item.strip():
+            load_scenario_file(item.strip())
+    _ENV_LOADED = value
 
 
 def get_scenario(name: str) -> ScenarioConfig:
-    """A registered scenario by name (``hr-rl``, ``hl-rr``, ``static``, …)."""
+    """A registered scenario by name (``hr-rl``, ``hl-rr``, ``static``, …, and the variants of
+    the files in ``PIONEER_SCENARIOS``)."""
     key = _key(name)
+    if key not in _REGISTRY:
+        _load_env_scenarios()
     if key not in _REGISTRY:
         raise ScenarioError(
             expect("scenario", f"one of {scenario_names()}", name, "pick a listed scenario name")
