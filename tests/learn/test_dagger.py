@@ -526,6 +526,27 @@ def test_a_run_from_before_the_action_mode_option_resumes(run_mdn, reward_file, 
     assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
 
 
+def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):
+    """The run records its scenario's full config; a variant redefined under the same name
+    (e.g. an edited scenario file) cannot silently resume, and an older run without the
+    record resumes and gets one."""
+    res, _ = run_mdn
+    recorded = json.loads((res.out / dagger.SCENARIO_FILE).read_text())
+    assert recorded == json.loads(json.dumps(scenarios.get_scenario(TINY).to_dict()))
+    out = tmp_path / "changed"
+    shutil.copytree(res.out, out)
+    longer = _tiny_scenario().replace(sim=SimConfig(time_limit=2 * TIME_LIMIT))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(scenarios._REGISTRY, TINY, lambda: longer)
+        with pytest.raises(ConfigError) as err:
+            run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert_house_message(str(err.value), TINY, "sim", "--out")
+    (out / dagger.SCENARIO_FILE).unlink()
+    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert again.curves == res.curves
+    assert json.loads((out / dagger.SCENARIO_FILE).read_text()) == recorded
+
+
 # ------------------------------------------------------------------------------ bad settings
 @pytest.mark.parametrize(
     ("changes", "needle"),

@@ -11,6 +11,7 @@ actually applied (so a frame's label is what the teacher would send had it been 
 Output directory (everything written atomically; a rerun of the same command resumes)::
 
     DIR/config.json                      the DaggerConfig (a rerun must match it)
+    DIR/scenario.json                    the scenario's full config (a rerun must match it)
     DIR/reward.npz                       the teacher's density reward
     DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, clearance, …)
     DIR/rounds/round-RR/student.safetensors   the student trained after round RR
@@ -63,6 +64,7 @@ from pioneer.parallel import bounded_map, spawn_pool
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "dagger_seed", "run_dagger"]
 
 CONFIG_FILE = "config.json"
+SCENARIO_FILE = "scenario.json"
 FINAL_FILE = "student.safetensors"
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
 
@@ -269,6 +271,29 @@ def _check_config(out: Path, cfg: DaggerConfig) -> None:
     write_text_atomic(p, json.dumps(cfg.to_dict(), indent=2) + "\n")
 
 
+def _check_scenario(out: Path, name: str) -> None:
+    """Record the scenario's full config; a resumed run must see the same one (a variant from
+    a scenario file can change under an unchanged name)."""
+    from pioneer.sim.scenarios import get_scenario
+
+    mine = json.loads(json.dumps(get_scenario(name).to_dict()))
+    p = out / SCENARIO_FILE
+    if p.exists():
+        old = json.loads(p.read_text())
+        if old != mine:
+            diff = sorted(k for k in {*old, *mine} if old.get(k) != mine.get(k))
+            raise ConfigError(
+                expect(
+                    f"{out}: scenario {name!r}",
+                    f"the scenario this run started with ({diff} differ)",
+                    "a changed definition",
+                    "restore the scenario file, or use a new --out directory",
+                )
+            )
+        return
+    write_text_atomic(p, json.dumps(mine, indent=1) + "\n")
+
+
 def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:
     if not isinstance(model, MDN):
         return {}
@@ -319,6 +344,7 @@ def run_dagger(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _check_config(out, cfg)
+    _check_scenario(out, cfg.scenario)
     reward_path = Path(reward) if reward is not None else out / "reward.npz"
     if reward is None and not reward_path.exists():
         from pioneer.control.teacher import default_reward
