@@ -28,6 +28,7 @@ from pioneer.eval.harness import (
     run_task,
 )
 from pioneer.sim.env import NavEnv
+from pioneer_testutils import assert_house_message
 
 TIMING = ("wall_time_s", "decision_ms")
 GOAL = PolicySpec.make("goal")  # in "static" it drives into the person: ~20 steps an episode
@@ -358,3 +359,26 @@ def test_ray_backend_gives_the_same_records(tmp_path):
     assert len(seen) == len(recs) == 4
     assert _untimed(recs) == _untimed(process)
     assert _untimed(read_records(tmp_path / "ray" / EPISODES_FILE)) == _untimed(process)
+
+
+def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path, monkeypatch):
+    """scenarios.json pins each scenario's definition to the output folder."""
+    from pioneer.sim import scenarios as sc
+    from pioneer.sim.world import SimConfig
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    short = sc.static_study_scenario(sim=SimConfig(time_limit=1.0)).replace(name="static-1s")
+    sc.register_scenario("static-1s", lambda: short)
+    out = tmp_path / "ev"
+    first = evaluate(["static", "static-1s"], [GOAL], 1, 1, out, workers=1, progress=False)
+    recorded = json.loads((out / "scenarios.json").read_text())
+    assert set(recorded) == {"static", "static-1s"}
+    assert recorded["static-1s"]["sim"]["time_limit"] == 1.0
+    again = evaluate(["static-1s"], [GOAL], 1, 1, out, workers=1, progress=False)
+    assert len(again) == len(first) == 2  # same definition: resumes, nothing re-run
+    longer = short.replace(sim=SimConfig(time_limit=2.0))
+    sc.register_scenario("static-1s", lambda: longer)
+    with pytest.raises(ConfigError) as err:
+        evaluate(["static-1s"], [GOAL], 1, 2, out, workers=1, progress=False)
+    assert_house_message(str(err.value), "static-1s", "sim", "--out")
+    assert len(_lines(out / EPISODES_FILE)) == 2

@@ -6,7 +6,9 @@ derived deterministically from (scenario, seed, trial), so any episode can be re
 appended to ``episodes.jsonl`` by the parent process as they arrive (one JSON object a line,
 flushed and fsynced), so an interrupted run resumes where it stopped; a malformed line is
 reported with its line number, never skipped. Backends: local processes (default) or a Ray
-cluster (extra ``distributed``).
+cluster (extra ``distributed``). ``scenarios.json`` records the full config of every scenario
+evaluated into the folder; resuming with a scenario whose definition changed under the same
+name (an edited scenario file) is refused, so one table never mixes two layouts.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from pioneer.errors import ConfigError, DataError, expect
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
 
 EPISODES_FILE = "episodes.jsonl"
+SCENARIOS_FILE = "scenarios.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,11 +215,46 @@ def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
         ) from exc
     if not ray.is_initialized():
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
-    remote = ray.remote(run_task)
+    from pioneer.sim.scenarios import SCENARIOS_ENV
+
+    files = os.environ.get(SCENARIOS_ENV)  # scenario files: the same paths on every node
+    remote = (
+        ray.remote(runtime_env={"env_vars": {SCENARIOS_ENV: files}})(run_task)
+        if files
+        else ray.remote(run_task)
+    )
     refs = [remote.remote(t) for t in tasks]
     while refs:
         done, refs = ray.wait(refs, num_returns=1)
         yield ray.get(done[0])
+
+
+def _record_scenarios(out: Path, names: Sequence[str]) -> None:
+    """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
+    from pioneer.io import write_text_atomic
+    from pioneer.sim.scenarios import get_scenario
+
+    p = out / SCENARIOS_FILE
+    try:
+        known: dict[str, Any] = json.loads(p.read_text()) if p.exists() else {}
+    except json.JSONDecodeError as exc:
+        raise DataError(
+            expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
+        ) from exc
+    mine = {n: json.loads(json.dumps(get_scenario(n).to_dict())) for n in names}
+    for name, cfg in mine.items():
+        if name in known and known[name] != cfg:
+            diff = sorted(k for k in {*cfg, *known[name]} if cfg.get(k) != known[name].get(k))
+            raise ConfigError(
+                expect(
+                    f"{out}: scenario {name!r}",
+                    f"the definition its episodes there were run with ({diff} differ)",
+                    "a changed definition",
+                    "restore the scenario file, or use a new --out directory",
+                )
+            )
+    if any(n not in known for n in mine):
+        write_text_atomic(p, json.dumps({**known, **mine}, indent=1) + "\n")
 
 
 def evaluate(
@@ -248,6 +286,7 @@ def evaluate(
         check_policy_name(spec.name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    _record_scenarios(out, scenarios)
     path = out / EPISODES_FILE
     records = read_records(path)
     done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
