@@ -222,3 +222,52 @@ def test_scenarios_option_with_a_bad_file_exits_2_with_one_line(tmp_path):
     assert proc.returncode == 2
     line = _one_error_line(proc.stderr)
     assert "bad.json" in line and "'d'" in line
+
+
+# --------------------------------------------------------------------------------------------
+# --policy NAME:key=value,… (own checkpoints, options, row labels)
+
+
+def test_eval_policy_parameters_reach_the_workers(tmp_path):
+    from pioneer.data import shipped_student
+
+    ckpt = shipped_student("hr-rl", "mlp")
+    out = tmp_path / "ev"
+    argv = ["eval", "--scenario", "hr-rl", "--seeds", "1", "--trials", "2", "--out", str(out)]
+    pols = ["student-mlp", f"student-mlp:checkpoint={ckpt},label=mine"]
+    assert main([*argv, "--policy", *pols, "--workers", "2"]) == 0
+    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    by_row = {}
+    for r in recs:
+        by_row.setdefault(r["policy"], []).append(r)
+    assert sorted(by_row) == ["mine", "student-mlp"]
+    strip = ("policy", "wall_time_s", "decision_ms")
+    same = [{k: v for k, v in r.items() if k not in strip} for r in by_row["mine"]]
+    base = [{k: v for k, v in r.items() if k not in strip} for r in by_row["student-mlp"]]
+    assert sorted(same, key=str) == sorted(base, key=str)  # the same checkpoint
+
+
+@pytest.mark.parametrize(
+    ("policies", "needle"),
+    [
+        (["student-mlp:chekpoint=x"], "chekpoint"),
+        (["goal", "goal"], "label="),
+        (["goal:"], "NAME"),
+        (["nope:a=1"], "nope"),
+    ],
+)
+def test_eval_bad_policy_parameters_exit_2_with_one_line(tmp_path, policies, needle):
+    proc = _pioneer(
+        "eval", "--scenario", "static", "--out", str(tmp_path / "e"), "--policy", *policies
+    )
+    assert proc.returncode == 2
+    assert needle in _one_error_line(proc.stderr)
+    assert not (tmp_path / "e").exists()
+
+
+def test_run_with_a_policy_label_and_parameters(capsys):
+    assert (
+        main(["run", "--scenario", "static", "--policy", "goal:label=my-goal", "--seed", "1"]) == 0
+    )
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rec["policy"] == "my-goal"

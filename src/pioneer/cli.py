@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pioneer.errors import ConfigError, PioneerError, expect
+
+if TYPE_CHECKING:
+    from pioneer.eval.harness import PolicySpec
 
 __all__ = ["main"]
 
@@ -22,8 +27,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from pioneer.sim.world import scan
 
     scenario = get_scenario(args.scenario)
+    spec = _policy_spec(args.policy)
     abl = _ablation_kwargs(args)
-    if abl and not args.policy.startswith("teacher"):
+    if abl and not spec.name.startswith("teacher"):
         raise ConfigError(
             expect(
                 "--no-density/--no-goal/--no-obstacle",
@@ -32,9 +38,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 "drop the flags",
             )
         )
-    policy = build_policy(args.policy, scenario.name, **abl)
+    policy = build_policy(spec.name, scenario.name, **{**dict(spec.kwargs), **abl})
+    if spec.label:
+        policy.name = spec.label
     if abl:
-        policy.name = args.policy + "".join(f"-no-{k}" for k in abl)
+        policy.name = spec.row + "".join(f"-no-{k}" for k in abl)
     want_frames = bool(args.gif or args.png)
     rec, traj = run_episode(scenario, policy, seed=args.seed, record=want_frames)
     if traj is not None:
@@ -186,20 +194,46 @@ def _add_ablation_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-obstacle", action="store_true", help="teacher without the obstacle term")
 
 
+def _policy_spec(text: str) -> PolicySpec:
+    """``--policy NAME[:key=value,…]`` → a checked spec (parameters against the factory; a
+    ``checkpoint``/``model``/``reward`` path made absolute so that every worker finds it)."""
+    from pioneer.control.policy import check_policy_kwargs, check_policy_name
+    from pioneer.eval.harness import PolicySpec
+
+    spec = PolicySpec.parse(text)
+    check_policy_name(spec.name)
+    kwargs = dict(spec.kwargs)
+    if kwargs:
+        import pioneer.control  # noqa: F401  (registers the controllers)
+
+        check_policy_kwargs(spec.name, kwargs)
+        for key in ("checkpoint", "model", "reward"):
+            if isinstance(kwargs.get(key), str) and "{" not in kwargs[key]:
+                kwargs[key] = str(Path(kwargs[key]).resolve())
+    return dataclasses.replace(spec, kwargs=tuple(sorted(kwargs.items())))
+
+
 def _cmd_eval(args: argparse.Namespace) -> int:
     from pioneer.eval.harness import PolicySpec, evaluate
     from pioneer.eval.metrics import summarize
 
     abl = _ablation_kwargs(args)
     suffix = "".join(f"-no-{k}" for k in abl)
-    specs = [
-        PolicySpec.make(
-            p,
-            label=p + suffix if (abl and p == "teacher") else "",
-            **(abl if p == "teacher" else {}),
+    specs = []
+    for text in args.policy:
+        spec = _policy_spec(text)
+        if abl and spec.name == "teacher":
+            kw = {**dict(spec.kwargs), **abl}
+            spec = PolicySpec(spec.name, tuple(sorted(kw.items())), spec.row + suffix)
+        specs.append(spec)
+    rows = [s.row for s in specs]
+    twice = sorted({r for r in rows if rows.count(r) > 1})
+    if twice:
+        raise ConfigError(
+            expect(
+                "--policy rows", "distinct labels", twice, "add label=NAME to the repeated policy"
+            )
         )
-        for p in args.policy
-    ]
     recs = evaluate(
         args.scenario,
         specs,
@@ -324,7 +358,11 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run one episode of a policy; optionally write a GIF/PNG")
     r.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, static, hr-rl-r03, …")
-    r.add_argument("--policy", default="goal", help="controller name (see pioneer.control)")
+    r.add_argument(
+        "--policy",
+        default="goal",
+        help="controller NAME or NAME:key=value,… (e.g. student-mdn:checkpoint=PATH)",
+    )
     r.add_argument("--seed", type=int, default=0, help="episode seed")
     r.add_argument("--gif", help="write an animation of the episode here")
     r.add_argument("--png", help="write a trajectory plot here")
@@ -334,7 +372,12 @@ def _parser() -> argparse.ArgumentParser:
 
     e = sub.add_parser("eval", help="evaluate policies: N seeds × M trials, parallel, resumable")
     e.add_argument("--scenario", nargs="+", default=["hr-rl", "hl-rr"])
-    e.add_argument("--policy", nargs="+", default=["teacher"])
+    e.add_argument(
+        "--policy",
+        nargs="+",
+        default=["teacher"],
+        help="NAME or NAME:key=value,…,label=ROW (e.g. student-mdn:checkpoint=PATH,label=mine)",
+    )
     e.add_argument("--seeds", type=int, default=5)
     e.add_argument("--trials", type=int, default=100)
     e.add_argument("--out", required=True, help="output folder (episodes.jsonl, summary.json)")

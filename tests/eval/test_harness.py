@@ -382,3 +382,34 @@ def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path,
         evaluate(["static-1s"], [GOAL], 1, 2, out, workers=1, progress=False)
     assert_house_message(str(err.value), "static-1s", "sim", "--out")
     assert len(_lines(out / EPISODES_FILE)) == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "name", "kwargs", "label"),
+    [
+        ("goal", "goal", {}, ""),
+        ("teacher:density=false,horizon=2.5", "teacher", {"density": False, "horizon": 2.5}, ""),
+        (
+            "student-mdn:checkpoint=C:/runs/a b/s.safetensors,action_mode=mean,label=mine",
+            "student-mdn",
+            {"checkpoint": "C:/runs/a b/s.safetensors", "action_mode": "mean"},
+            "mine",
+        ),
+        ('sfm:name="x",label=3', "sfm", {"name": "x"}, "3"),
+        ("dwa:v=[0.1]", "dwa", {"v": (0.1,)}, ""),  # a list becomes a (hashable) tuple
+    ],
+)
+def test_policy_spec_parse(text, name, kwargs, label):
+    spec = PolicySpec.parse(text)
+    assert (spec.name, dict(spec.kwargs), spec.label) == (name, kwargs, label)
+    assert spec == PolicySpec(name, tuple(sorted(kwargs.items())), label)  # order-free
+    assert hash(spec) == hash(PolicySpec.parse(text))
+
+
+@pytest.mark.parametrize(
+    "text", ["", ":a=1", "goal:", "goal:a", "goal:=1", "goal:a=1,a=2", "goal:1a=2"]
+)
+def test_policy_spec_parse_refuses_bad_syntax(text):
+    with pytest.raises(ConfigError) as err:
+        PolicySpec.parse(text)
+    assert_house_message(str(err.value), "NAME")

@@ -19,6 +19,7 @@ __all__ = [
     "LAZY_POLICIES",
     "Policy",
     "build_policy",
+    "check_policy_kwargs",
     "check_policy_name",
     "make_policy",
     "policy_factory",
@@ -84,6 +85,27 @@ def policy_factory(name: str) -> Callable[..., Policy]:
             expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
         )
     return _FACTORIES[name]
+
+
+def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> None:
+    """Raise :class:`ConfigError` unless the factory of ``name`` takes every key of ``kwargs``
+    (imports the factory: torch for the students)."""
+    import inspect
+
+    params = inspect.signature(policy_factory(name)).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    allowed = sorted(k for k in params if k != "scenario")
+    unknown = sorted(set(kwargs) - set(allowed))
+    if unknown:
+        raise ConfigError(
+            expect(
+                f"policy {name!r} parameters",
+                f"keys among {allowed}",
+                unknown,
+                "correct the key (see the policy's factory)",
+            )
+        )
 
 
 def build_policy(name: str, scenario: str | None = None, **kwargs: Any) -> Policy:

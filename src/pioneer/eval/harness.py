@@ -51,6 +51,38 @@ class PolicySpec:
         """Convenience constructor with keyword arguments."""
         return cls(name, tuple(sorted(kwargs.items())), label)
 
+    @classmethod
+    def parse(cls, text: str) -> PolicySpec:
+        """``NAME`` or ``NAME:key=value,key=value`` (the CLI's ``--policy`` syntax).
+
+        Values are read as JSON when they parse (``0.5``, ``true``, ``"x"``), else taken as
+        text (paths); ``label=`` names the row. E.g.
+        ``student-mdn:checkpoint=runs/d/student.safetensors,action_mode=mean,label=mine``.
+        """
+        name, sep, rest = text.partition(":")
+        fix = "write NAME or NAME:key=value,key=value (e.g. student-mdn:checkpoint=PATH)"
+        if not name.strip() or (sep and not rest.strip()):
+            raise ConfigError(expect("policy", "NAME[:key=value,…]", text, fix))
+        kwargs: dict[str, Any] = {}
+        for item in rest.split(",") if rest else []:
+            key, eq, raw = item.partition("=")
+            key = key.strip()
+            if not eq or not key.isidentifier() or key in kwargs:
+                raise ConfigError(
+                    expect(f"policy {name!r} parameter", "a new key=value", item.strip(), fix)
+                )
+            try:
+                value = json.loads(raw)
+            except json.JSONDecodeError:
+                value = raw
+            if isinstance(value, dict):
+                raise ConfigError(
+                    expect(f"policy {name!r} parameter {key!r}", "a number, text or list", raw, fix)
+                )
+            kwargs[key] = tuple(value) if isinstance(value, list) else value  # hashable
+        label = kwargs.pop("label", "")
+        return cls(name.strip(), tuple(sorted(kwargs.items())), str(label))
+
 
 @dataclasses.dataclass(frozen=True)
 class Task:
