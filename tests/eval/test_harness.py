@@ -413,3 +413,31 @@ def test_policy_spec_parse_refuses_bad_syntax(text):
     with pytest.raises(ConfigError) as err:
         PolicySpec.parse(text)
     assert_house_message(str(err.value), "NAME")
+
+
+@pytest.mark.parametrize(
+    ("spec", "needle"),
+    [
+        (PolicySpec.make("student-mdn"), "shipped student"),
+        (PolicySpec.make("student-shield"), "shipped student"),
+        (PolicySpec.make("teacher"), "shipped demos"),
+        (PolicySpec.make("crowdnav++"), "CrowdNav++"),
+    ],
+)
+def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, monkeypatch, spec, needle):
+    """A variant without a 'base' has no shipped demos/students/weights: refused up front."""
+    from pioneer.sim import scenarios as sc
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    sc.register_scenario("lobby-x", lambda: sc.elevator_scenario().replace(name="lobby-x"))
+    with pytest.raises(DataError) as err:
+        evaluate(["lobby-x"], [GOAL, spec], 1, 1, tmp_path / "ev", workers=1, progress=False)
+    assert_house_message(str(err.value), needle, "lobby-x")
+    assert not (tmp_path / "ev" / EPISODES_FILE).exists()
+    # with its own parts (a checkpoint / reward / weights parameter) nothing is looked up
+    own = {"student-mdn": "checkpoint", "student-shield": "checkpoint", "teacher": "reward"}
+    if spec.name in own:
+        kw = {own[spec.name]: "x", **({"reward": "x"} if spec.name == "student-shield" else {})}
+        from pioneer.eval.harness import _check_shipped_parts
+
+        _check_shipped_parts(["lobby-x"], [PolicySpec.make(spec.name, **kw)])

@@ -505,3 +505,21 @@ def test_a_variant_with_a_base_uses_the_shipped_demos_and_students_of_it(clean_r
     with pytest.raises(ScenarioError) as err:
         sc.register_scenario("other", lambda: elevator_scenario(), base="deep")
     assert_house_message(str(err.value), "base", "deep")
+
+
+def test_the_example_scenario_file_loads_and_every_variant_samples(clean_registry):
+    from pathlib import Path
+
+    from pioneer.data import shipped_student
+
+    sc = clean_registry
+    path = Path(__file__).resolve().parents[2] / "examples" / "scenarios.json"
+    names = sc.load_scenario_file(path)
+    assert len(names) >= 5
+    rng = np.random.default_rng(0)
+    for name in names:
+        cfg = sc.get_scenario(name)
+        sample_state(cfg, rng)
+        assert sc.scenario_base(name) in ("hr-rl", "hl-rr", "static")
+        if sc.scenario_base(name) != "static":
+            shipped_student(name)

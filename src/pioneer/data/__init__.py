@@ -6,10 +6,11 @@ from pathlib import Path
 
 from pioneer.errors import DataError, expect
 
-__all__ = ["base_scenario", "shipped_demos", "shipped_student"]
+__all__ = ["base_scenario", "shipped_crowdnav_weights", "shipped_demos", "shipped_student"]
 
 DEMOS_DIR = Path(__file__).parent / "demos"
 STUDENTS_DIR = Path(__file__).parent / "students"
+BASELINES_DIR = Path(__file__).parent / "baselines"
 
 
 def base_scenario(scenario: str) -> str:
@@ -49,6 +50,26 @@ def shipped_student(scenario: str, kind: str = "mdn") -> Path:
                 f"{scenario}-{kind}",
                 "train one with `pioneer distill` and pass checkpoint=PATH, or give the variant"
                 " a built-in 'base'",
+            )
+        )
+    return p
+
+
+def shipped_crowdnav_weights(scenario: str) -> Path:
+    """Path of the shipped CrowdNav++ weights for ``scenario`` (``baselines/crowdnav-NAME``)."""
+    name = base_scenario(scenario)
+    p = BASELINES_DIR / f"crowdnav-{name}.safetensors"
+    if not p.is_file():
+        names = sorted(
+            q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors")
+        )
+        raise DataError(
+            expect(
+                "CrowdNav++ shipped weights",
+                f"a scenario among {names}",
+                scenario,
+                f"train them (pioneer train crowdnav++ --scenario {scenario} --out DIR) and "
+                "pass weights=DIR/policy.safetensors",
             )
         )
     return p

@@ -261,6 +261,32 @@ def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
         yield ray.get(done[0])
 
 
+def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
+    """Fail before running anything when a policy would load a shipped part the scenario does
+    not have (demos for the teacher's default reward, a student, CrowdNav++ weights) — without
+    building the policies (no torch in the parent)."""
+    from pioneer.data import shipped_crowdnav_weights, shipped_demos, shipped_student
+
+    for sc in scenarios:
+        for spec in policies:
+            kw = dict(spec.kwargs)
+            name = spec.name
+            if name in ("student-mdn", "student-mlp", "student-shield") and not kw.get(
+                "checkpoint"
+            ):
+                shipped_student(sc, "mlp" if name == "student-mlp" else "mdn")
+            teacher = name in ("teacher", "teacher-no-goal", "teacher-no-obstacle")
+            shield_teacher = (
+                name == "student-shield"
+                and kw.get("mode", "handover") == "handover"
+                and kw.get("fallback", "teacher") == "teacher"
+            )
+            if ((teacher and kw.get("density", True)) or shield_teacher) and not kw.get("reward"):
+                shipped_demos(sc)
+            if name == "crowdnav++" and not kw.get("weights"):
+                shipped_crowdnav_weights(sc)
+
+
 def _record_scenarios(out: Path, names: Sequence[str]) -> None:
     """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
     from pioneer.io import write_text_atomic
@@ -316,6 +342,7 @@ def evaluate(
         get_scenario(sc)
     for spec in policies:
         check_policy_name(spec.name)
+    _check_shipped_parts(scenarios, policies)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _record_scenarios(out, scenarios)

@@ -102,7 +102,6 @@ __all__ = [
 CHECKPOINT_FORMAT = "pioneer.crowdnav/1"
 ROBOT_DIM = 8  # [p_x, p_y, r, g_x − p_x, g_y − p_y, v_pref, cos θ, sin θ]
 TEMPORAL_DIM = 2  # [v, ω]
-BASELINES_DIR = Path(__file__).resolve().parent.parent / "data" / "baselines"
 F32 = NDArray[np.float32]
 
 
@@ -350,22 +349,11 @@ def load_crowdnav(path: str | Path) -> CrowdNavNet:
 
 
 def shipped_weights(scenario: str) -> Path:
-    """Path of the shipped weights for ``scenario`` (``data/baselines/crowdnav-{scenario}``)."""
-    p = BASELINES_DIR / f"crowdnav-{scenario}.safetensors"
-    if not p.is_file():
-        names = sorted(
-            q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors")
-        )
-        raise DataError(
-            expect(
-                "CrowdNav++ shipped weights",
-                f"a scenario among {names}",
-                scenario,
-                f"train them (pioneer train crowdnav++ --scenario {scenario} --out DIR) and "
-                "pass weights=DIR/policy.safetensors",
-            )
-        )
-    return p
+    """Path of the shipped weights for ``scenario`` (``data/baselines/crowdnav-{scenario}``; a
+    variant with a built-in ``base`` uses that scenario's)."""
+    from pioneer.data import shipped_crowdnav_weights
+
+    return shipped_crowdnav_weights(scenario)
 
 
 # ------------------------------------------------------------------------------ policy
