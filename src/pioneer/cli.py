@@ -196,7 +196,7 @@ def _add_ablation_flags(p: argparse.ArgumentParser) -> None:
 
 def _policy_spec(text: str) -> PolicySpec:
     """``--policy NAME[:key=value,…]`` → a checked spec (parameters against the factory; a
-    ``checkpoint``/``model``/``reward`` path made absolute so that every worker finds it)."""
+    ``checkpoint``/``model``/``reward``/``weights`` path made absolute for every worker)."""
     from pioneer.control.policy import check_policy_kwargs, check_policy_name
     from pioneer.eval.harness import PolicySpec
 
@@ -207,7 +207,7 @@ def _policy_spec(text: str) -> PolicySpec:
         import pioneer.control  # noqa: F401  (registers the controllers)
 
         check_policy_kwargs(spec.name, kwargs)
-        for key in ("checkpoint", "model", "reward"):
+        for key in ("checkpoint", "model", "reward", "weights"):
             if isinstance(kwargs.get(key), str) and "{" not in kwargs[key]:
                 kwargs[key] = str(Path(kwargs[key]).resolve())
     return dataclasses.replace(spec, kwargs=tuple(sorted(kwargs.items())))
