@@ -441,3 +441,34 @@ def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, monkeypatch, 
         from pioneer.eval.harness import _check_shipped_parts
 
         _check_shipped_parts(["lobby-x"], [PolicySpec.make(spec.name, **kw)])
+
+
+@pytest.mark.slow
+def test_ray_workers_see_scenario_files(tmp_path, monkeypatch):
+    ray = pytest.importorskip("ray")
+    from pioneer.sim import scenarios as sc
+
+    path = tmp_path / "v.json"
+    path.write_text(
+        json.dumps(
+            {
+                "format": "pioneer.scenarios/1",
+                "scenarios": {"static-2s": {"static": {}, "sim": {"time_limit": 2.0}}},
+            }
+        )
+    )
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    monkeypatch.setattr(sc, "_ENV_LOADED", None)
+    monkeypatch.delenv(sc.SCENARIOS_ENV, raising=False)
+    started = not ray.is_initialized()
+    if started:  # before the variable is set: the workers can only get it from the task's env
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    monkeypatch.setenv(sc.SCENARIOS_ENV, str(path))
+    try:
+        recs = evaluate(
+            ["static-2s"], [GOAL], 1, 2, tmp_path / "ray", backend="ray", progress=False
+        )
+    finally:
+        if started:
+            ray.shutdown()
+    assert len(recs) == 2 and all(r["time_s"] <= 2.0 + 1e-9 for r in recs)
