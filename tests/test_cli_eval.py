@@ -271,3 +271,15 @@ def test_run_with_a_policy_label_and_parameters(capsys):
     )
     rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert rec["policy"] == "my-goal"
+
+
+def test_scenarios_command_lists_variants_and_draws_them(variant_file, tmp_path, capsys):
+    out = tmp_path / "layouts"
+    assert main(["--scenarios", str(variant_file), "scenarios", "--png-dir", str(out)]) == 0
+    text = capsys.readouterr().out
+    rows = {line.split()[0]: line.split() for line in text.splitlines()[1:] if line.strip()}
+    assert rows["hr-rl-wide"][1] == "hr-rl"  # the variant's learned parts
+    assert rows["static-short"][1] == "static-short" and rows["hr-rl-r03"][1] == "hr-rl"
+    assert rows["static-short"][-1] == "3.0"  # its time limit [s]
+    pngs = sorted(p.stem for p in out.glob("*.png"))
+    assert {"hr-rl", "hl-rr", "static", "hr-rl-wide", "static-short"} <= set(pngs)

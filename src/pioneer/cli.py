@@ -213,6 +213,41 @@ def _policy_spec(text: str) -> PolicySpec:
     return dataclasses.replace(spec, kwargs=tuple(sorted(kwargs.items())))
 
 
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    """List the scenarios (built-in and from ``--scenarios`` files); optionally draw each."""
+    import numpy as np
+
+    from pioneer.data import base_scenario
+    from pioneer.sim.scenarios import get_scenario, sample_state, scenario_names
+
+    names = scenario_names()
+    print(
+        f"{'scenario':<24} {'learned parts of':<16} {'humans':>6} {'map [m]':>11} {'limit [s]':>9}"
+    )
+    for name in names:
+        cfg = get_scenario(name)
+        xmin, xmax, ymin, ymax = cfg.bounds
+        size = f"{xmax - xmin:.1f} × {ymax - ymin:.1f}"
+        print(
+            f"{name:<24} {base_scenario(name):<16} {len(cfg.humans):>6} {size:>11} "
+            f"{cfg.sim.time_limit:>9.1f}"
+        )
+    if args.png_dir:
+        from tqdm import tqdm
+
+        from pioneer.viz import plot_trajectory
+
+        out = Path(args.png_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        for name in tqdm(names, desc="layouts", unit="png", disable=None):
+            cfg = get_scenario(name)
+            state = sample_state(cfg, np.random.default_rng(args.seed))
+            title = f"{name} · initial state, seed {args.seed}"
+            plot_trajectory(cfg.world(), [state], out / f"{name}.png", title=title)
+        print(f"wrote {len(names)} layouts to {out}")
+    return 0
+
+
 def _cmd_eval(args: argparse.Namespace) -> int:
     from pioneer.eval.harness import PolicySpec, evaluate
     from pioneer.eval.metrics import summarize
@@ -369,6 +404,11 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--lidar", action="store_true", help="draw the LiDAR rays in the GIF")
     _add_ablation_flags(r)
     r.set_defaults(func=_cmd_run)
+
+    sc = sub.add_parser("scenarios", help="list the scenarios (with --scenarios files); draw them")
+    sc.add_argument("--png-dir", help="write one PNG per scenario (its layout and a start state)")
+    sc.add_argument("--seed", type=int, default=0, help="seed of the drawn start state")
+    sc.set_defaults(func=_cmd_scenarios)
 
     e = sub.add_parser("eval", help="evaluate policies: N seeds × M trials, parallel, resumable")
     e.add_argument("--scenario", nargs="+", default=["hr-rl", "hl-rr"])
