@@ -472,6 +472,10 @@ def test_a_bad_entry_registers_nothing_and_a_missing_file_is_named(clean_registr
     with pytest.raises(ScenarioError):
         sc.load_scenario_file(_write(tmp_path, data))
     assert "good" not in sc.scenario_names()  # all or nothing
+    data["scenarios"] = {"tight": {"elevator": {"n_boarding": 3, "lobby_depth": 2.0}}}
+    with pytest.raises(ScenarioError) as err:  # fits for most start states, not for all
+        sc.load_scenario_file(_write(tmp_path, data))
+    assert_house_message(str(err.value), "'tight'", "seed", "collision-free")
     data["scenarios"] = {"short": {"static": {"length": 5.0}}}  # start row 0.1 m off the wall
     with pytest.raises(ScenarioError) as err:
         sc.load_scenario_file(_write(tmp_path, data))

@@ -479,6 +479,7 @@ _KINDS: dict[str, tuple[type[Config], Callable[..., ScenarioConfig]]] = {
     "static": (StaticStudyLayout, static_study_scenario),
 }
 _ENV_LOADED: str | None = None  # the value of SCENARIOS_ENV whose files are registered
+PLACEMENT_CHECK_SEEDS = 50  # start states drawn per variant when a scenario file is loaded
 
 
 def _scenario_factory(
@@ -510,9 +511,10 @@ def load_scenario_file(path: str | Path) -> list[str]:
     defaults. An optional ``"base": "hr-rl"`` lets the variant use that built-in scenario's
     shipped demos (the teacher's default reward) and shipped students. Episode seeds derive
     from the scenario *name*, so a variant evaluated twice under one name gets the same
-    episodes. Put the file's path in the ``PIONEER_SCENARIOS``
-    environment variable (or pass ``pioneer --scenarios FILE``) so that worker processes
-    register the variants too.
+    episodes. Each variant must place its bodies for the start-state seeds 0–49 (a layout
+    that is too tight for some draws is refused here rather than halfway through a run).
+    Put the file's path in the ``PIONEER_SCENARIOS`` environment variable (or pass
+    ``pioneer --scenarios FILE``) so that worker processes register the variants too.
     """
     p = Path(path)
     fix = f"write a JSON object with 'format': {SCENARIO_FILE_FORMAT!r} and 'scenarios'"
@@ -557,9 +559,17 @@ def load_scenario_file(path: str | Path) -> list[str]:
             )
         try:
             factories[name] = _scenario_factory(name, kinds[0], entry[kinds[0]], entry.get("sim"))
-            factories[name]()  # build it once: placement errors name the file and the variant
+            cfg = factories[name]()  # build it once: placement errors name the file and variant
         except PioneerError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
+        for seed in range(PLACEMENT_CHECK_SEEDS):  # a layout too tight for some start states
+            try:  # would stop an evaluation in the middle; ~1 ms per seed when it fits
+                sample_state(cfg, np.random.default_rng(seed))
+            except ScenarioError as exc:
+                raise ScenarioError(
+                    f"{where}: start state for seed {seed} (of {PLACEMENT_CHECK_SEEDS} checked): "
+                    f"{exc}"
+                ) from exc
         base = entry.get("base")
         if base is not None and (not isinstance(base, str) or _key(base) not in _BUILTIN):
             raise ScenarioError(
