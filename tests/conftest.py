@@ -26,3 +26,16 @@ def rng() -> object:
 def open_world() -> object:
     """A world without walls and with far-away bounds."""
     return tu.open_world()
+
+
+@pytest.fixture
+def scenario_registry(monkeypatch: pytest.MonkeyPatch) -> object:
+    """``pioneer.sim.scenarios`` with its registry, bases and ``PIONEER_SCENARIOS`` restored
+    after the test (register variants freely; ``main()`` may extend the variable)."""
+    from pioneer.sim import scenarios as sc
+
+    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
+    monkeypatch.setattr(sc, "_ENV_LOADED", "")
+    monkeypatch.setenv(sc.SCENARIOS_ENV, "")
+    return sc

@@ -12,7 +12,7 @@ import pytest
 from pioneer.cli import main
 from pioneer.control.teacher import make_teacher
 from pioneer.eval.episode import run_episode
-from pioneer.eval.harness import EPISODES_FILE
+from pioneer.eval.harness import EPISODES_FILE, read_records
 
 
 def _one_error_line(err: str) -> str:
@@ -183,34 +183,30 @@ _VARIANTS = {
 
 
 @pytest.fixture
-def variant_file(tmp_path, monkeypatch):
-    from pioneer.sim import scenarios as sc
-
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
-    monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
-    monkeypatch.setattr(sc, "_ENV_LOADED", None)
-    monkeypatch.setenv(sc.SCENARIOS_ENV, "")  # main() appends to it; restored afterwards
+def variant_file(tmp_path, scenario_registry):
     path = tmp_path / "variants.json"
     path.write_text(json.dumps(_VARIANTS))
     return path
 
 
+def _eval_records(out, *argv):
+    """Run ``pioneer *argv eval … --out out`` and return the episode records."""
+    assert main([*argv, "--out", str(out)]) == 0
+    return read_records(out / EPISODES_FILE)
+
+
 def test_scenarios_option_runs_a_variant_in_two_worker_processes(variant_file, tmp_path):
-    out = tmp_path / "ev"
     argv = ["--scenarios", str(variant_file), "eval", "--scenario", "static-short"]
-    argv += ["--policy", "goal", "--seeds", "1", "--trials", "4", "--out", str(out)]
-    assert main([*argv, "--workers", "2"]) == 0
-    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    argv += ["--policy", "goal", "--seeds", "1", "--trials", "4", "--workers", "2"]
+    recs = _eval_records(tmp_path / "ev", *argv)
     assert len(recs) == 4 and {r["scenario"] for r in recs} == {"static-short"}
     assert all(r["time_s"] <= 3.0 + 1e-9 for r in recs)  # the variant's time limit, not 30 s
 
 
 def test_a_variant_with_a_base_runs_the_shipped_student_in_workers(variant_file, tmp_path):
-    out = tmp_path / "ev"
     argv = ["--scenarios", str(variant_file), "eval", "--scenario", "hr-rl-wide"]
-    argv += ["--policy", "student-mlp", "--seeds", "1", "--trials", "2", "--out", str(out)]
-    assert main([*argv, "--workers", "2"]) == 0
-    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    argv += ["--policy", "student-mlp", "--seeds", "1", "--trials", "2", "--workers", "2"]
+    recs = _eval_records(tmp_path / "ev", *argv)
     assert [r["policy"] for r in recs] == ["student-mlp"] * 2
     assert all(r["time_s"] <= 2.0 + 1e-9 for r in recs)
 
@@ -232,11 +228,9 @@ def test_eval_policy_parameters_reach_the_workers(tmp_path):
     from pioneer.data import shipped_student
 
     ckpt = shipped_student("hr-rl", "mlp")
-    out = tmp_path / "ev"
-    argv = ["eval", "--scenario", "hr-rl", "--seeds", "1", "--trials", "2", "--out", str(out)]
+    argv = ["eval", "--scenario", "hr-rl", "--seeds", "1", "--trials", "2", "--workers", "2"]
     pols = ["student-mlp", f"student-mlp:checkpoint={ckpt},label=mine"]
-    assert main([*argv, "--policy", *pols, "--workers", "2"]) == 0
-    recs = [json.loads(line) for line in (out / EPISODES_FILE).read_text().splitlines()]
+    recs = _eval_records(tmp_path / "ev", *argv, "--policy", *pols)
     by_row = {}
     for r in recs:
         by_row.setdefault(r["policy"], []).append(r)

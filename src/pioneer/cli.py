@@ -220,12 +220,11 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     from pioneer.data import base_scenario
     from pioneer.sim.scenarios import get_scenario, sample_state, scenario_names
 
-    names = scenario_names()
+    configs = {name: get_scenario(name) for name in scenario_names()}
     print(
         f"{'scenario':<24} {'learned parts of':<16} {'humans':>6} {'map [m]':>11} {'limit [s]':>9}"
     )
-    for name in names:
-        cfg = get_scenario(name)
+    for name, cfg in configs.items():
         xmin, xmax, ymin, ymax = cfg.bounds
         size = f"{xmax - xmin:.1f} × {ymax - ymin:.1f}"
         print(
@@ -239,12 +238,11 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
         out = Path(args.png_dir)
         out.mkdir(parents=True, exist_ok=True)
-        for name in tqdm(names, desc="layouts", unit="png", disable=None):
-            cfg = get_scenario(name)
+        for name, cfg in tqdm(configs.items(), desc="layouts", unit="png", disable=None):
             state = sample_state(cfg, np.random.default_rng(args.seed))
             title = f"{name} · initial state, seed {args.seed}"
             plot_trajectory(cfg.world(), [state], out / f"{name}.png", title=title)
-        print(f"wrote {len(names)} layouts to {out}")
+        print(f"wrote {len(configs)} layouts to {out}")
     return 0
 
 
@@ -570,16 +568,15 @@ def _single_threaded_blas() -> None:
 
 
 def _register_scenario_files(files: Sequence[str]) -> None:
-    """Load ``--scenarios`` files here (a bad file fails before any work) and add them to
-    ``PIONEER_SCENARIOS``, which spawned worker processes inherit and load on demand."""
-    from pioneer.sim.scenarios import SCENARIOS_ENV, load_scenario_file
+    """Add ``--scenarios`` files to ``PIONEER_SCENARIOS``, which spawned worker processes
+    inherit, and load them here once (a bad file fails before any work)."""
+    from pioneer.sim.scenarios import SCENARIOS_ENV, load_env_scenarios
 
-    for f in files:
-        load_scenario_file(f)
     if files:
         paths = [str(Path(f).resolve()) for f in files]
         old = os.environ.get(SCENARIOS_ENV, "")
         os.environ[SCENARIOS_ENV] = os.pathsep.join([*filter(None, [old]), *paths])
+        load_env_scenarios()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

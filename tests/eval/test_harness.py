@@ -361,12 +361,11 @@ def test_ray_backend_gives_the_same_records(tmp_path):
     assert _untimed(read_records(tmp_path / "ray" / EPISODES_FILE)) == _untimed(process)
 
 
-def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path, monkeypatch):
+def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path, scenario_registry):
     """scenarios.json pins each scenario's definition to the output folder."""
-    from pioneer.sim import scenarios as sc
     from pioneer.sim.world import SimConfig
 
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    sc = scenario_registry
     short = sc.static_study_scenario(sim=SimConfig(time_limit=1.0)).replace(name="static-1s")
     sc.register_scenario("static-1s", lambda: short)
     out = tmp_path / "ev"
@@ -424,11 +423,9 @@ def test_policy_spec_parse_refuses_bad_syntax(text):
         (PolicySpec.make("crowdnav++"), "CrowdNav++"),
     ],
 )
-def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, monkeypatch, spec, needle):
+def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, scenario_registry, spec, needle):
     """A variant without a 'base' has no shipped demos/students/weights: refused up front."""
-    from pioneer.sim import scenarios as sc
-
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+    sc = scenario_registry
     sc.register_scenario("lobby-x", lambda: sc.elevator_scenario().replace(name="lobby-x"))
     with pytest.raises(DataError) as err:
         evaluate(["lobby-x"], [GOAL, spec], 1, 1, tmp_path / "ev", workers=1, progress=False)
@@ -444,10 +441,9 @@ def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, monkeypatch, 
 
 
 @pytest.mark.slow
-def test_ray_workers_see_scenario_files(tmp_path, monkeypatch):
+def test_ray_workers_see_scenario_files(tmp_path, monkeypatch, scenario_registry):
     ray = pytest.importorskip("ray")
-    from pioneer.sim import scenarios as sc
-
+    sc = scenario_registry  # PIONEER_SCENARIOS is empty until after ray.init
     path = tmp_path / "v.json"
     path.write_text(
         json.dumps(
@@ -457,9 +453,6 @@ def test_ray_workers_see_scenario_files(tmp_path, monkeypatch):
             }
         )
     )
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
-    monkeypatch.setattr(sc, "_ENV_LOADED", None)
-    monkeypatch.delenv(sc.SCENARIOS_ENV, raising=False)
     started = not ray.is_initialized()
     if started:  # before the variable is set: the workers can only get it from the task's env
         ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)

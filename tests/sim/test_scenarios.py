@@ -334,11 +334,10 @@ def test_scenario_config_round_trips_through_dict():
 
 
 # ------------------------------------------------------------------ user-registered variants
-def test_a_registered_variant_is_reachable_by_name_and_runs(monkeypatch):
-    from pioneer.sim import scenarios as sc
+def test_a_registered_variant_is_reachable_by_name_and_runs(scenario_registry):
     from pioneer.sim.env import NavEnv
 
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))  # leave no trace for other tests
+    sc = scenario_registry  # leave no trace for other tests
     deep = ElevatorLayout(lobby_depth=2.8)
     sc.register_scenario("hr-rl-deep", lambda: elevator_scenario(deep, name="hr-rl-deep"))
     assert "hr-rl-deep" in sc.scenario_names()
@@ -354,10 +353,8 @@ def test_a_registered_variant_is_reachable_by_name_and_runs(monkeypatch):
     assert obs.shape == (29,) and info["event"] is None
 
 
-def test_registering_a_builtin_name_or_a_non_scenario_is_refused(monkeypatch):
-    from pioneer.sim import scenarios as sc
-
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
+def test_registering_a_builtin_name_or_a_non_scenario_is_refused(scenario_registry):
+    sc = scenario_registry
     with pytest.raises(ScenarioError) as err:
         sc.register_scenario("hr-rl", lambda: elevator_scenario())
     assert_house_message(str(err.value), "hr-rl", "rename")
@@ -380,15 +377,9 @@ VARIANTS = {
 
 
 @pytest.fixture
-def clean_registry(monkeypatch):
+def clean_registry(scenario_registry):
     """Scenario registry and PIONEER_SCENARIOS restored after the test."""
-    from pioneer.sim import scenarios as sc
-
-    monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
-    monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
-    monkeypatch.setattr(sc, "_ENV_LOADED", None)
-    monkeypatch.delenv(sc.SCENARIOS_ENV, raising=False)
-    return sc
+    return scenario_registry
 
 
 def _write(tmp_path, data, name="variants.json"):

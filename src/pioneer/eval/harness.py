@@ -290,7 +290,7 @@ def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec
 def _record_scenarios(out: Path, names: Sequence[str]) -> None:
     """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
     from pioneer.io import write_text_atomic
-    from pioneer.sim.scenarios import get_scenario
+    from pioneer.sim.scenarios import pin_scenario
 
     p = out / SCENARIOS_FILE
     try:
@@ -299,18 +299,7 @@ def _record_scenarios(out: Path, names: Sequence[str]) -> None:
         raise DataError(
             expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
         ) from exc
-    mine = {n: json.loads(json.dumps(get_scenario(n).to_dict())) for n in names}
-    for name, cfg in mine.items():
-        if name in known and known[name] != cfg:
-            diff = sorted(k for k in {*cfg, *known[name]} if cfg.get(k) != known[name].get(k))
-            raise ConfigError(
-                expect(
-                    f"{out}: scenario {name!r}",
-                    f"the definition its episodes there were run with ({diff} differ)",
-                    "a changed definition",
-                    "restore the scenario file, or use a new --out directory",
-                )
-            )
+    mine = {n: pin_scenario(n, known.get(n), str(out)) for n in names}
     if any(n not in known for n in mine):
         write_text_atomic(p, json.dumps({**known, **mine}, indent=1) + "\n")
 

@@ -272,26 +272,14 @@ def _check_config(out: Path, cfg: DaggerConfig) -> None:
 
 
 def _check_scenario(out: Path, name: str) -> None:
-    """Record the scenario's full config; a resumed run must see the same one (a variant from
-    a scenario file can change under an unchanged name)."""
-    from pioneer.sim.scenarios import get_scenario
+    """Record the scenario's full definition; a resumed run must see the same one."""
+    from pioneer.sim.scenarios import pin_scenario
 
-    mine = json.loads(json.dumps(get_scenario(name).to_dict()))
     p = out / SCENARIO_FILE
-    if p.exists():
-        old = json.loads(p.read_text())
-        if old != mine:
-            diff = sorted(k for k in {*old, *mine} if old.get(k) != mine.get(k))
-            raise ConfigError(
-                expect(
-                    f"{out}: scenario {name!r}",
-                    f"the scenario this run started with ({diff} differ)",
-                    "a changed definition",
-                    "restore the scenario file, or use a new --out directory",
-                )
-            )
-        return
-    write_text_atomic(p, json.dumps(mine, indent=1) + "\n")
+    recorded = json.loads(p.read_text()) if p.exists() else None
+    mine = pin_scenario(name, recorded, str(out))
+    if recorded is None:
+        write_text_atomic(p, json.dumps(mine, indent=1) + "\n")
 
 
 def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pioneer.config import Config, check_nonnegative, check_positive, check_range
-from pioneer.errors import PioneerError, ScenarioError, expect
+from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
 from pioneer.sim.humans import ARRIVED, WALKING
 from pioneer.sim.world import SimConfig, State, World
 
@@ -34,7 +34,9 @@ __all__ = [
     "StaticStudyLayout",
     "elevator_scenario",
     "get_scenario",
+    "load_env_scenarios",
     "load_scenario_file",
+    "pin_scenario",
     "register_scenario",
     "sample_state",
     "scenario_base",
@@ -421,8 +423,22 @@ def _key(name: str) -> str:
 
 def scenario_names() -> list[str]:
     """Names accepted by :func:`get_scenario`."""
-    _load_env_scenarios()
+    load_env_scenarios()
     return sorted(_REGISTRY)
+
+
+def _check_new_name(where: str, name: str) -> None:
+    if not _key(name) or _key(name) in _BUILTIN:
+        raise ScenarioError(
+            expect(where, f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it")
+        )
+
+
+def _check_base(where: str, base: object) -> None:
+    if base is not None and (not isinstance(base, str) or _key(base) not in _BUILTIN):
+        raise ScenarioError(
+            expect(f"{where}: base", f"one of {sorted(_BUILTIN)}", base, "fix the name")
+        )
 
 
 def register_scenario(
@@ -438,17 +454,9 @@ def register_scenario(
     students) exist only for the built-in ones: pass a reward file for a new name, or name a
     built-in ``base`` whose shipped demos and students the variant uses.
     """
+    _check_new_name("scenario name", name)
+    _check_base(f"scenario {name!r}", base)
     key = _key(name)
-    if base is not None and _key(base) not in _BUILTIN:
-        raise ScenarioError(
-            expect(f"scenario {name!r}: base", f"one of {sorted(_BUILTIN)}", base, "fix the name")
-        )
-    if not key or key in _BUILTIN:
-        raise ScenarioError(
-            expect(
-                "scenario name", f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it"
-            )
-        )
     cfg = factory()
     if not isinstance(cfg, ScenarioConfig):
         raise ScenarioError(
@@ -468,7 +476,7 @@ def scenario_base(name: str) -> str:
     students) serve ``name``: the ``base`` it was registered with, else ``name`` itself."""
     key = _key(name)
     if key not in _REGISTRY:
-        _load_env_scenarios()
+        load_env_scenarios()
     return _BASES.get(key, name)
 
 
@@ -540,10 +548,7 @@ def load_scenario_file(path: str | Path) -> list[str]:
     bases: dict[str, str | None] = {}
     for name, entry in entries.items():
         where = f"scenario file {p}: {name!r}"
-        if not _key(name) or _key(name) in _BUILTIN:
-            raise ScenarioError(
-                expect(where, f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it")
-            )
+        _check_new_name(where, name)
         kinds = sorted(set(entry) & set(_KINDS)) if isinstance(entry, dict) else []
         extra = (
             sorted(set(entry) - set(_KINDS) - {"sim", "base"}) if isinstance(entry, dict) else []
@@ -570,18 +575,14 @@ def load_scenario_file(path: str | Path) -> list[str]:
                     f"{where}: start state for seed {seed} (of {PLACEMENT_CHECK_SEEDS} checked): "
                     f"{exc}"
                 ) from exc
-        base = entry.get("base")
-        if base is not None and (not isinstance(base, str) or _key(base) not in _BUILTIN):
-            raise ScenarioError(
-                expect(f"{where}: base", f"one of {sorted(_BUILTIN)}", base, "fix the name")
-            )
-        bases[name] = base
+        _check_base(where, entry.get("base"))
+        bases[name] = entry.get("base")
     for name, factory in factories.items():  # all or nothing: register only a valid file
         register_scenario(name, factory, base=bases[name])
     return list(factories)
 
 
-def _load_env_scenarios() -> None:
+def load_env_scenarios() -> None:
     """Register the files named in ``PIONEER_SCENARIOS`` (once per value of the variable)."""
     global _ENV_LOADED
     value = os.environ.get(SCENARIOS_ENV, "")
@@ -593,12 +594,30 @@ def _load_env_scenarios() -> None:
     _ENV_LOADED = value
 
 
+def pin_scenario(name: str, recorded: dict[str, Any] | None, where: str) -> dict[str, Any]:
+    """The full definition of ``name`` as plain JSON data; if ``recorded`` (the definition an
+    output folder was made with) differs, raise :class:`ConfigError` naming the changed fields
+    — a variant from a scenario file can change under an unchanged name."""
+    mine: dict[str, Any] = json.loads(json.dumps(get_scenario(name).to_dict()))
+    if recorded is not None and recorded != mine:
+        diff = sorted(k for k in {*recorded, *mine} if recorded.get(k) != mine.get(k))
+        raise ConfigError(
+            expect(
+                f"{where}: scenario {name!r}",
+                f"the definition recorded there ({diff} differ)",
+                "a changed definition",
+                "restore the scenario file, or use a new --out directory",
+            )
+        )
+    return mine
+
+
 def get_scenario(name: str) -> ScenarioConfig:
     """A registered scenario by name (``hr-rl``, ``hl-rr``, ``static``, …, and the variants of
     the files in ``PIONEER_SCENARIOS``)."""
     key = _key(name)
     if key not in _REGISTRY:
-        _load_env_scenarios()
+        load_env_scenarios()
     if key not in _REGISTRY:
         raise ScenarioError(
             expect("scenario", f"one of {scenario_names()}", name, "pick a listed scenario name")
