@@ -300,45 +300,12 @@ def _env_breakdown(plan: Plan) -> dict[str, Any]:
     return {f"us_per_call_{k}": metric(v / n * 1e6, "us") for k, v in secs.items()}
 
 
-def _step_kernel_args(world: Any, s: State, u: np.ndarray, dt: float, n_sub: int) -> tuple:
-    """Arguments of the private numba kernel behind ``pioneer.sim.world.step`` (diagnostic)."""
-    return (
-        s.robot,
-        u,
-        s.goal,
-        s.t,
-        s.path_length,
-        s.collided,
-        s.reached,
-        s.clearance,
-        s.wall_clearance,
-        s.h_pos,
-        s.h_vel,
-        s.h_radius,
-        s.h_vpref,
-        s.h_waypoints,
-        s.h_n_waypoints,
-        s.h_wp_index,
-        s.h_status,
-        s.h_delay,
-        s.h_wait_for,
-        s.h_home,
-        world.walls,
-        world.bounds,
-        world.sfm_params,
-        world.sim.robot.radius,
-        world.sim.goal_tolerance,
-        dt,
-        n_sub,
-    )
-
-
 def _step_kernel_case(
     world: Any, s0: State, u: np.ndarray, n: int, dt: float | None = None
 ) -> Case | None:
     """``n`` chained in-place calls of the bare step kernel (None if its signature changed)."""
     try:
-        from pioneer.sim.world import _step_kernel
+        from pioneer.sim.world import _step_kernel, _step_kernel_args
     except ImportError:
         return None
     h_dt = world.sim.dt if dt is None else dt

@@ -16,7 +16,9 @@ from pioneer.sim.geometry import (
     ray_segment,
     segment_segment_distance,
     swept_point_distance,
+    wall_offsets,
 )
+from pioneer.sim.world import WALL_LANES, wall_soa
 
 coord = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False, allow_subnormal=False)
 PROP = settings(max_examples=80, deadline=None)
@@ -91,6 +93,30 @@ def test_point_segment_distance_matches_reference(px, py, x1, y1, x2, y2):
 
 # --------------------------------------------------------------------------------------------
 # segment / segment
+
+
+@PROP
+@given(
+    st.lists(st.tuples(coord, coord, coord, coord), min_size=0, max_size=9),
+    coord,
+    coord,
+    st.booleans(),
+)
+def test_wall_offsets_equal_the_scalar_primitive_bit_for_bit(walls, px, py, point_wall):
+    """The padded wall table + vectorised loop give closest_point_on_segment's exact bits."""
+    if point_wall and walls:  # a degenerate (point-like) wall
+        walls[0] = (walls[0][0], walls[0][1], walls[0][0], walls[0][1])
+    arr = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    table = wall_soa(arr)
+    assert table.shape[1] % WALL_LANES == 0 and table.shape[1] >= max(1, len(walls))
+    out = np.full((3, table.shape[1]), np.nan)
+    wall_offsets(px, py, table, out)
+    for k, (x1, y1, x2, y2) in enumerate(walls):
+        cx, cy = closest_point_on_segment(px, py, x1, y1, x2, y2)
+        assert out[0, k] == px - cx and out[1, k] == py - cy
+        assert out[2, k] == point_segment_distance(px, py, x1, y1, x2, y2)
+    # the padding walls are never in range of a force and never the nearest wall
+    assert np.all(out[2, len(walls) :] > 1e11)
 
 
 def test_segment_segment_distance_known_values():

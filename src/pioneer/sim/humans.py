@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
-from pioneer.sim.geometry import closest_point_on_segment, norm2d
+from pioneer.sim.geometry import closest_point_on_segment, norm2d, wall_offsets
 
 __all__ = ["ARRIVED", "GONE", "WALKING", "SocialForceConfig", "sfm_substep"]
 
@@ -107,7 +107,7 @@ class SocialForceConfig(Config):
         )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def sfm_substep(
     b: int,  # which world copy of the batch to advance
     pos: NDArray[np.float64],  # (B, N, 2) [m], updated in place
@@ -125,11 +125,13 @@ def sfm_substep(
     fy: NDArray[np.float64],  # (N,) scratch: force y
     ready: NDArray[np.float64],  # (N,) scratch: 1 = walking to its waypoints, 0 = waiting
     wall_d: NDArray[np.float64],  # (N,) scratch: nearest-wall distance at the substep start
+    wall_scr: NDArray[np.float64],  # (3, M') scratch: offset x, y and distance to each wall
     t_now: float,  # [s] time at the start of the substep
     rx: float,
     ry: float,
     r_robot: float,  # robot position and radius [m]
     walls: NDArray[np.float64],  # (M, 4) [m]
+    wall_tab: NDArray[np.float64],  # (5, M') World.wall_table: x1, y1, ex, ey, ‖e‖² (padded)
     bounds: NDArray[np.float64],  # (4,) xmin, xmax, ymin, ymax [m]
     params: NDArray[np.float64],  # SocialForceConfig.as_array()
     h: float,  # [s]
@@ -153,6 +155,7 @@ def sfm_substep(
     settle_d = params[11]
     n = pos.shape[1]
     m = walls.shape[0]
+    m_pad = wall_tab.shape[1]
     if fx.shape[0] < n or fy.shape[0] < n or ready.shape[0] < n or wall_d.shape[0] < n:
         raise ValueError("sfm_substep: scratch arrays must have length >= N")
     for i in range(n):
@@ -220,19 +223,19 @@ def sfm_substep(
             mag = a_r * math.exp(z)
             ax += mag * dx / d
             ay += mag * dy / d
-        for w in range(m):
-            cx, cy = closest_point_on_segment(
-                px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
-            )
-            dx = px - cx
-            dy = py - cy
-            d = norm2d(dx, dy)
+        # Walls in two passes: first the geometry of every wall, branch-free so that LLVM
+        # vectorises it, then the repulsion of the walls in range, in wall order (the same
+        # operations as one scalar pass, so bit-for-bit the same forces).
+        rad_i = radius[b, i]
+        wall_offsets(px, py, wall_tab, wall_scr)
+        for w in range(m_pad):
+            d = wall_scr[2, w]
             wall_d[i] = min(wall_d[i], d)
-            z = (radius[b, i] - d) / b_w
+            z = (rad_i - d) / b_w
             if d > 1e-9 and z > EXP_CUTOFF:
                 mag = a_w * math.exp(z)
-                ax += mag * dx / d
-                ay += mag * dy / d
+                ax += mag * wall_scr[0, w] / d
+                ay += mag * wall_scr[1, w] / d
         fx[i] = ax
         fy[i] = ay
     for i in range(n):

@@ -26,13 +26,13 @@ from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.geometry import (
     norm2d,
-    point_segment_distance,
     segment_segment_distance,
     swept_point_distance,
+    wall_offsets,
 )
 from pioneer.sim.humans import GONE, SocialForceConfig, sfm_substep
 from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
-from pioneer.sim.robot import RobotConfig, clip_command, integrate_unicycle, validate_command
+from pioneer.sim.robot import RobotConfig, integrate_unicycle, validate_command
 
 __all__ = ["SimConfig", "State", "World", "goal_bearing", "observe", "scan", "step"]
 
@@ -76,11 +76,47 @@ class World:
         object.__setattr__(self, "walls", walls)
         object.__setattr__(self, "bounds", bounds)
         object.__setattr__(self, "_sfm_params", self.sim.social_force.as_array())
+        object.__setattr__(self, "_wall_soa", wall_soa(walls))
 
     @property
     def sfm_params(self) -> F64:
         """Packed social-force parameters for the kernels."""
         return self._sfm_params  # type: ignore[attr-defined]
+
+    @property
+    def wall_table(self) -> F64:
+        """The walls as rows x1, y1, ex, ey, ‖e‖² for the social-force kernel (see wall_soa)."""
+        return self._wall_soa  # type: ignore[attr-defined]
+
+
+WALL_LANES = 4  # the wall table is padded to a multiple of this (one AVX2 vector of float64)
+FAR = 1.0e12  # [m] where padding walls sit: never in range of any force, never the nearest
+
+
+def wall_soa(walls: F64) -> F64:
+    """Walls ``(M, 4)`` as a ``(5, M')`` table: x1, y1, ex = x2 − x1, ey = y2 − y1 and ‖e‖².
+
+    Column-major per quantity and padded to a multiple of ``WALL_LANES`` with point walls far
+    away, so the social-force kernel's wall loop runs whole SIMD vectors on contiguous rows.
+    ‖e‖² of a point wall is stored as 1 (its e = 0, so the closest point is its end point).
+    The values are computed exactly as the scalar primitive computes them.
+    """
+    m = walls.shape[0]
+    m_pad = max(WALL_LANES, -(-m // WALL_LANES) * WALL_LANES)
+    table = np.zeros((5, m_pad))
+    table[0] = FAR
+    table[1] = FAR
+    table[4] = 1.0
+    ex = walls[:, 2] - walls[:, 0]
+    ey = walls[:, 3] - walls[:, 1]
+    ll = ex * ex + ey * ey
+    table[0, :m] = walls[:, 0]
+    table[1, :m] = walls[:, 1]
+    table[2, :m] = ex
+    table[3, :m] = ey
+    table[4, :m] = np.where(ll > 0.0, ll, 1.0)
+    table.setflags(write=False)
+    return table
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -142,16 +178,28 @@ class State:
         return State(**{k: v[idx].copy() for k, v in self._arrays().items()})
 
     def copy(self) -> State:
-        """A deep copy (states are treated as values; the kernels work on copies)."""
-        return State(**{k: v.copy() for k, v in self._arrays().items()})
+        """A deep copy (states are treated as values; the kernels work on copies).
+
+        Built without ``__init__``: the frozen dataclass's per-field ``object.__setattr__``
+        cost as much as copying the arrays, and ``step`` copies a state on every call.
+        """
+        new = object.__new__(State)
+        fields = new.__dict__
+        mine = self.__dict__
+        for k in _STATE_FIELDS:
+            fields[k] = mine[k].copy()
+        return new
 
     def _arrays(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {k: getattr(self, k) for k in _STATE_FIELDS}
 
     @property
     def humans_present(self) -> NDArray[np.bool_]:
         """(B, N) mask of humans still in the map."""
         return self.h_status != GONE
+
+
+_STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
 
 
 def step(world: World, state: State, command: F64 | list[float], dt: float | None = None) -> State:
@@ -162,46 +210,60 @@ def step(world: World, state: State, command: F64 | list[float], dt: float | Non
     """
     h_dt = world.sim.dt if dt is None else float(dt)
     check_positive("step", "dt", h_dt)
-    u = clip_command(validate_command(command, state.batch_size), world.sim.robot)
+    u = validate_command(command, state.batch_size)
     new = state.copy()
     n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
-    _step_kernel(
-        new.robot,
+    _step_kernel(*_step_kernel_args(world, new, u, h_dt, n_sub))  # clips u into new.command
+    return new
+
+
+def _step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> tuple[Any, ...]:
+    """The arguments of ``_step_kernel`` advancing ``s`` in place (also used by benchmarks)."""
+    robot = world.sim.robot
+    return (
+        s.robot,
         u,
-        new.goal,
-        new.t,
-        new.path_length,
-        new.collided,
-        new.reached,
-        new.clearance,
-        new.wall_clearance,
-        new.h_pos,
-        new.h_vel,
-        new.h_radius,
-        new.h_vpref,
-        new.h_waypoints,
-        new.h_n_waypoints,
-        new.h_wp_index,
-        new.h_status,
-        new.h_delay,
-        new.h_wait_for,
-        new.h_home,
+        s.command,
+        robot.v_min,
+        robot.v_max,
+        robot.omega_max,
+        s.goal,
+        s.t,
+        s.path_length,
+        s.collided,
+        s.reached,
+        s.clearance,
+        s.wall_clearance,
+        s.h_pos,
+        s.h_vel,
+        s.h_radius,
+        s.h_vpref,
+        s.h_waypoints,
+        s.h_n_waypoints,
+        s.h_wp_index,
+        s.h_status,
+        s.h_delay,
+        s.h_wait_for,
+        s.h_home,
         world.walls,
+        world.wall_table,
         world.bounds,
         world.sfm_params,
         world.sim.robot.radius,
         world.sim.goal_tolerance,
-        h_dt,
+        dt,
         n_sub,
     )
-    new.command[:] = u
-    return new
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _step_kernel(
     robot: F64,
     cmd: F64,
+    cmd_out: F64,
+    v_min: float,
+    v_max: float,
+    omega_max: float,
     goal: F64,
     t: F64,
     path: F64,
@@ -221,6 +283,7 @@ def _step_kernel(
     hwait: NDArray[np.int64],
     hhome: F64,
     walls: F64,
+    wall_tab: F64,
     bounds: F64,
     params: F64,
     r_robot: float,
@@ -237,13 +300,17 @@ def _step_kernel(
     fy = np.empty(n_h)
     ready = np.empty(n_h)
     wall_d = np.empty(n_h)
+    wall_scr = np.empty((3, wall_tab.shape[1]))
     was_present = np.empty(n_h, dtype=np.bool_)
     for b in range(n_b):
         x = robot[b, 0]
         y = robot[b, 1]
         th = robot[b, 2]
-        v = cmd[b, 0]
-        w = cmd[b, 1]
+        # clip_command's np.clip, element by element (the same values)
+        v = min(max(cmd[b, 0], v_min), v_max)
+        w = min(max(cmd[b, 1], -omega_max), omega_max)
+        cmd_out[b, 0] = v
+        cmd_out[b, 1] = w
         sag = v * h * abs(w * h) / 8.0
         cmin = np.inf
         wmin = np.inf
@@ -269,11 +336,13 @@ def _step_kernel(
                 fy,
                 ready,
                 wall_d,
+                wall_scr,
                 t[b] + s * h,
                 x,
                 y,
                 r_robot,
                 walls,
+                wall_tab,
                 bounds,
                 params,
                 h,
@@ -289,12 +358,10 @@ def _step_kernel(
             half = 0.5 * norm2d(x1 - x, y1 - y)
             mx = 0.5 * (x + x1)
             my = 0.5 * (y + y1)
+            wall_offsets(mx, my, wall_tab, wall_scr)
             for k in range(m):
                 # Cheap bound first: the chord lies within `half` of its midpoint.
-                dm = point_segment_distance(
-                    mx, my, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
-                )
-                if dm - half - r_robot - sag >= wmin:
+                if wall_scr[2, k] - half - r_robot - sag >= wmin:
                     continue
                 d = segment_segment_distance(
                     x, y, x1, y1, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
