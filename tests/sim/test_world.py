@@ -19,11 +19,13 @@ from pioneer.sim import (
     State,
     World,
     get_scenario,
+    observe,
     sample_state,
     static_study_scenario,
     step,
 )
 from pioneer.sim.robot import integrate_unicycle
+from pioneer.sim.world import observe_states
 from pioneer_testutils import (
     assert_house_message,
     make_state,
@@ -371,3 +373,21 @@ def test_swept_clearances_never_exceed_true_arc_clearances(
     step_len = v * dt / 400
     assert new.wall_clearance[0] >= true_wall - 2 * sag - step_len - 1e-9
     assert new.clearance[0] >= true_human - 2 * sag - step_len - 1e-9
+
+
+def test_observe_states_equals_observing_each_state():
+    """One ray-casting call for a stack of states gives exactly each state's observation."""
+    scenario = get_scenario("hr-rl")
+    world = scenario.world()
+    rng = np.random.default_rng(3)
+    s = sample_state(scenario, rng).repeat(7)
+    states = []
+    for _ in range(4):
+        s = step(world, s, rng.uniform(-1.0, 1.0, (7, 2)), dt=0.3)
+        states.append(s)
+    stacked = observe_states(world, states)
+    assert stacked.shape == (4, 7, world.sim.lidar.obs_dim) and stacked.dtype == np.float32
+    for k, state in enumerate(states):
+        np.testing.assert_array_equal(stacked[k], observe(world, state))
+    with pytest.raises(ConfigError, match="equal B and N"):
+        observe_states(world, [states[0], states[1].take(0)])

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
-from pioneer.sim.world import State, World, observe, step
+from pioneer.sim.world import State, World, observe_states, step
 
 __all__ = ["Rollout", "candidate_commands", "rollout"]
 
@@ -79,7 +79,7 @@ def rollout(
         s.h_status[moving] = ARRIVED
         v0 = state.h_vel.copy()
     robot = np.empty((c, n_steps, 3))
-    obs = np.empty((c, n_steps, world.sim.lidar.obs_dim), dtype=np.float32)
+    states = []
     clear = np.full(c, np.inf)
     wclear = np.full(c, np.inf)
     for k in range(n_steps):
@@ -92,7 +92,10 @@ def rollout(
             np.minimum(s.clearance, gap, out=s.clearance)
             np.logical_or(s.collided, gap < 0.0, out=s.collided)
         robot[:, k] = s.robot
-        obs[:, k] = observe(world, s)
+        states.append(s)
         np.minimum(clear, s.clearance, out=clear)
         np.minimum(wclear, s.wall_clearance, out=wclear)
+    obs = np.empty((c, n_steps, world.sim.lidar.obs_dim), dtype=np.float32)  # (C, L, 29)
+    if states:
+        obs[:] = observe_states(world, states).transpose(1, 0, 2)
     return Rollout(commands, robot, obs, s.collided.copy(), clear, wclear, s)

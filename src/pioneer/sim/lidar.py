@@ -169,7 +169,7 @@ def cast_rays(
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _observation_kernel(
     ranges: NDArray[np.float64], goal_bearing: NDArray[np.float64], group: int, n_near: int
 ) -> NDArray[np.float32]:
@@ -177,28 +177,31 @@ def _observation_kernel(
     k_count = g_count // group
     out = np.empty((p_count, k_count + 2 * n_near + 1), dtype=np.float32)
     idx = np.empty(n_near, dtype=np.int64)
+    beam_angle = np.empty(g_count)  # wrapped angle of every beam, computed once
+    for b in range(g_count):
+        beam_angle[b] = wrap_angle(2.0 * math.pi * b / g_count)
     for p in range(p_count):
         for k in range(k_count):
             v = ranges[p, k * group]
             for j in range(1, group):
                 v = min(v, ranges[p, k * group + j])
             out[p, k] = v
-        # The b smallest raw beams; ties keep the lowest beam index first.
-        for i in range(n_near):
-            best = -1
-            for b in range(g_count):
-                taken = False
-                for q in range(i):
-                    if idx[q] == b:
-                        taken = True
-                if taken:
-                    continue
-                if best < 0 or ranges[p, b] < ranges[p, best]:
-                    best = b
-            idx[i] = best
+        # The b smallest raw beams, nearest first; ties keep the lowest beam index first (one
+        # pass of a stable insertion into the sorted top b: strict < never passes an equal).
+        cnt = 0
+        for b in range(g_count):
+            v = ranges[p, b]
+            if cnt == n_near and not v < ranges[p, idx[n_near - 1]]:
+                continue
+            j = min(cnt, n_near - 1)
+            while j > 0 and v < ranges[p, idx[j - 1]]:
+                idx[j] = idx[j - 1]
+                j -= 1
+            idx[j] = b
+            cnt = min(cnt + 1, n_near)
         for i in range(n_near):
             out[p, k_count + i] = ranges[p, idx[i]]
-            out[p, k_count + n_near + i] = wrap_angle(2.0 * math.pi * idx[i] / g_count)
+            out[p, k_count + n_near + i] = beam_angle[idx[i]]
         out[p, k_count + 2 * n_near] = wrap_angle(goal_bearing[p])
     return out
 
