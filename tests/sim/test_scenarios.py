@@ -364,6 +364,16 @@ def test_registering_a_builtin_name_or_a_non_scenario_is_refused(scenario_regist
     assert "odd" not in sc.scenario_names()
 
 
+def test_a_layout_that_cannot_place_its_bodies_is_refused_at_registration(scenario_registry):
+    """Three boarders do not fit the default 1.3 m lobby: refused up front, not mid-run."""
+    sc = scenario_registry
+    crowded = ElevatorLayout(n_boarding=3)
+    with pytest.raises(ScenarioError) as err:
+        sc.register_scenario("crowded", lambda: elevator_scenario(crowded, name="crowded"))
+    assert "scenario 'crowded': start state for seed 0 (of 50 checked)" in str(err.value)
+    assert "crowded" not in sc.scenario_names()
+
+
 # --------------------------------------------------------------------------------------------
 # Scenario files (pioneer.scenarios/1) and PIONEER_SCENARIOS
 

@@ -449,14 +449,15 @@ def register_scenario(
     script's top level, so spawned workers register it too).
 
     ``factory`` builds the config, e.g. ``lambda: elevator_scenario(ElevatorLayout(
-    lobby_depth=2.8), name="hr-rl-deep")``; it is called once here to check it. Built-in names
+    lobby_depth=2.8), name="hr-rl-deep")``; it is called once here to check it, and its start
+    states for seeds 0–49 are drawn (a layout too tight to place every body is refused here,
+    not halfway through an evaluation). Built-in names
     cannot be replaced. Learned parts keyed by scenario (the teacher's default reward, shipped
     students) exist only for the built-in ones: pass a reward file for a new name, or name a
     built-in ``base`` whose shipped demos and students the variant uses.
     """
     _check_new_name("scenario name", name)
     _check_base(f"scenario {name!r}", base)
-    key = _key(name)
     cfg = factory()
     if not isinstance(cfg, ScenarioConfig):
         raise ScenarioError(
@@ -464,6 +465,24 @@ def register_scenario(
                 f"scenario {name!r} factory", "a ScenarioConfig", type(cfg).__name__, "return one"
             )
         )
+    _check_placement(f"scenario {name!r}", cfg)
+    _register(name, factory, base)
+
+
+def _check_placement(where: str, cfg: ScenarioConfig) -> None:
+    """Draw the start states of seeds 0–49: a layout too tight for some of them would stop an
+    evaluation in the middle (≈ 1 ms per seed when it fits)."""
+    for seed in range(PLACEMENT_CHECK_SEEDS):
+        try:
+            sample_state(cfg, np.random.default_rng(seed))
+        except ScenarioError as exc:
+            raise ScenarioError(
+                f"{where}: start state for seed {seed} (of {PLACEMENT_CHECK_SEEDS} checked): {exc}"
+            ) from exc
+
+
+def _register(name: str, factory: Callable[[], ScenarioConfig], base: str | None) -> None:
+    key = _key(name)
     _REGISTRY[key] = factory
     if base is None:
         _BASES.pop(key, None)
@@ -567,18 +586,11 @@ def load_scenario_file(path: str | Path) -> list[str]:
             cfg = factories[name]()  # build it once: placement errors name the file and variant
         except PioneerError as exc:
             raise ScenarioError(f"{where}: {exc}") from exc
-        for seed in range(PLACEMENT_CHECK_SEEDS):  # a layout too tight for some start states
-            try:  # would stop an evaluation in the middle; ~1 ms per seed when it fits
-                sample_state(cfg, np.random.default_rng(seed))
-            except ScenarioError as exc:
-                raise ScenarioError(
-                    f"{where}: start state for seed {seed} (of {PLACEMENT_CHECK_SEEDS} checked): "
-                    f"{exc}"
-                ) from exc
+        _check_placement(where, cfg)
         _check_base(where, entry.get("base"))
         bases[name] = entry.get("base")
     for name, factory in factories.items():  # all or nothing: register only a valid file
-        register_scenario(name, factory, base=bases[name])
+        _register(name, factory, bases[name])
     return list(factories)
 
 
