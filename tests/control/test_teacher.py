@@ -297,6 +297,45 @@ def test_switching_a_term_off_zeroes_it(off, hr_rl_reward):
     assert d.terms["total"] == pytest.approx(parts, rel=1e-12, abs=1e-12)
 
 
+def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
+    """Infeasible candidates are never chosen, so their density is not computed; the choice
+    equals the one from scoring every candidate (eq. 12 for all 120)."""
+    rows: list[int] = []
+
+    def recording(z):
+        rows.append(z.shape[0])
+        return hr_rl_reward(z)
+
+    t = LookaheadTeacher(recording)  # type: ignore[arg-type]
+    mixed = 0
+    for world, state in _teacher_states(12, seed=4):
+        t.reset({}, np.random.default_rng(0))
+        rows.clear()
+        d = t.decide(world, state)
+        ro = _rollout_of(t, world, state)
+        c, n_l = ro.robot.shape[:2]
+        feasible = ~ro.collided & (ro.min_clearance >= t.config.safety_margin)
+        assert rows == ([int(feasible.sum()) * n_l] if feasible.any() else [])
+        mixed += int(0 < feasible.sum() < c)
+        # reference: the density of all candidates, then the feasibility mask
+        feats = np.concatenate(
+            [ro.obs.astype(np.float64), np.broadcast_to(ro.commands[:, None], (c, n_l, 2))], 2
+        )
+        r_den = hr_rl_reward(feats.reshape(c * n_l, -1)).reshape(c, n_l).mean(axis=1)
+        d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
+        total, _ = combine(
+            r_den,
+            goal_term(ro.final_goal_distance, d_total),
+            obstacle_term(ro.obs),
+            ro.final_goal_distance,
+            d_total,
+            t.config.weights,
+        )
+        assert d.index == int(np.argmax(np.where(feasible, total, -np.inf)))
+        assert d.raw_terms["density"] == pytest.approx(r_den[d.index], rel=1e-6)
+    assert mixed >= 3  # states where some candidates collide and some do not
+
+
 def test_weight_overrides_replace_the_adaptive_weights(hr_rl_reward):
     w = RuleWeights(density_weight=0.5, goal_weight=3.0, obstacle_weight=2.0)
     d = _decide_with(w, hr_rl_reward)

@@ -140,15 +140,19 @@ class LookaheadTeacher:
         d_goal = ro.final_goal_distance
         r_goal = goal_term(d_goal, d_total)
         r_obs = obstacle_term(ro.obs)
-        if self.density is not None and w.use_density:
-            r_den = self.density(rollout_features(self.features, ro)).reshape(c, n_l).mean(axis=1)
-        else:
-            r_den = np.zeros(c)
+        feasible = ~ro.collided & (ro.min_clearance >= cfg.safety_margin)
+        n_feasible = int(feasible.sum())
+        r_den = np.zeros(c)
+        if self.density is not None and w.use_density and n_feasible:
+            # Only candidates that can be chosen: about half collide in the lobby, and the
+            # density is most of a decision's arithmetic. (Infeasible ones keep 0; they score −∞.)
+            feats = rollout_features(self.features, ro).reshape(c, n_l, -1)[feasible]
+            r_den[feasible] = self.density(feats.reshape(n_feasible * n_l, -1)).reshape(
+                n_feasible, n_l
+            ).mean(axis=1)
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
         total = total + extra
-        feasible = ~ro.collided & (ro.min_clearance >= cfg.safety_margin)
-        n_feasible = int(feasible.sum())
         if n_feasible == 0:
             self._prev = np.zeros(2)
             return Decision(self._prev.copy(), np.zeros(2), -1, 0, {}, {})

@@ -1,0 +1,101 @@
+"""Batched lookahead rollouts through the pure world step (SPEC 4).
+
+Each candidate command is held for the horizon T; the world (robot and humans) is advanced
+by :func:`pioneer.sim.world.step` at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states, every candidate in
+one batched call. Humans follow the privileged simulator model (they react to the robot) or,
+as an option, a constant-velocity prediction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.errors import ConfigError, expect
+from pioneer.sim.humans import ARRIVED, GONE
+from pioneer.sim.world import State, World, observe_states, step
+
+__all__ = ["Rollout", "candidate_commands", "rollout"]
+
+F64 = NDArray[np.float64]
+
+
+def candidate_commands(
+    v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8),
+    n_omega: int = 15,
+    omega_max: float = 0.4 * math.pi,
+) -> F64:
+    """The paper's candidate set: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2)."""
+    w = np.linspace(-omega_max, omega_max, n_omega)
+    vv, ww = np.meshgrid(np.asarray(v_values, dtype=np.float64), w, indexing="ij")
+    return np.stack([vv.ravel(), ww.ravel()], axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rollout:
+    """The predicted futures of C candidate commands over L steps."""
+
+    commands: F64  # (C, 2)
+    robot: F64  # (C, L, 3) poses x_1 … x_L
+    obs: NDArray[np.float32]  # (C, L, 29) observations o_1 … o_L
+    collided: NDArray[np.bool_]  # (C,) a predicted collision (humans or walls)
+    min_clearance: F64  # (C,) minimum swept clearance to any human [m]
+    min_wall_clearance: F64  # (C,) minimum swept clearance to walls [m]
+    final: State  # the C states at the horizon
+
+    @property
+    def final_goal_distance(self) -> F64:
+        """‖x_L − goal‖ for every candidate, (C,)."""
+        return np.linalg.norm(self.final.goal - self.robot[:, -1, :2], axis=1)
+
+
+def rollout(
+    world: World,
+    state: State,
+    commands: F64,
+    horizon: float = 3.0,
+    dt: float = 0.3,
+    human_model: str = "privileged",
+) -> Rollout:
+    """Roll every command of ``commands (C, 2)`` forward from ``state`` (B = 1)."""
+    if state.batch_size != 1:
+        raise ConfigError(
+            expect("rollout state", "a single state (B = 1)", state.batch_size, "take(i)")
+        )
+    if human_model not in ("privileged", "constant_velocity"):
+        raise ConfigError(
+            expect("human_model", "'privileged' or 'constant_velocity'", human_model, "pick one")
+        )
+    n_steps = math.floor(horizon / dt + 1e-9)
+    c = commands.shape[0]
+    s = state.repeat(c)
+    cv = human_model == "constant_velocity"
+    if cv:
+        # Freeze the social-force model; humans are moved along their current velocity instead.
+        moving = s.h_status != GONE
+        s.h_status[moving] = ARRIVED
+        v0 = state.h_vel.copy()
+    robot = np.empty((c, n_steps, 3))
+    states = []
+    clear = np.full(c, np.inf)
+    wclear = np.full(c, np.inf)
+    for k in range(n_steps):
+        s = step(world, s, commands, dt=dt)
+        if cv and state.n_humans:
+            s.h_pos[moving] = (state.h_pos + v0 * (dt * (k + 1))).repeat(c, axis=0)[moving]
+            # The step checked collisions against frozen humans; check the moved ones too.
+            gap = np.linalg.norm(s.h_pos - s.robot[:, None, :2], axis=2) - s.h_radius
+            gap = np.where(moving, gap - world.sim.robot.radius, np.inf).min(axis=1)
+            np.minimum(s.clearance, gap, out=s.clearance)
+            np.logical_or(s.collided, gap < 0.0, out=s.collided)
+        robot[:, k] = s.robot
+        states.append(s)
+        np.minimum(clear, s.clearance, out=clear)
+        np.minimum(wclear, s.wall_clearance, out=wclear)
+    obs = np.empty((c, n_steps, world.sim.lidar.obs_dim), dtype=np.float32)  # (C, L, 29)
+    if states:
+        obs[:] = observe_states(world, states).transpose(1, 0, 2)
+    return Rollout(commands, robot, obs, s.collided.copy(), clear, wclear, s)

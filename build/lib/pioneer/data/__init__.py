@@ -1,0 +1,75 @@
+"""Data shipped with the package: default demonstration datasets and trained students."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pioneer.errors import DataError, expect
+
+__all__ = ["base_scenario", "shipped_crowdnav_weights", "shipped_demos", "shipped_student"]
+
+DEMOS_DIR = Path(__file__).parent / "demos"
+STUDENTS_DIR = Path(__file__).parent / "students"
+BASELINES_DIR = Path(__file__).parent / "baselines"
+
+
+def base_scenario(scenario: str) -> str:
+    """The scenario whose shipped demos and students serve ``scenario``: ``hr-rl-r03`` →
+    ``hr-rl``, and a registered variant → the ``base`` it names (see
+    :func:`pioneer.sim.scenarios.scenario_base`)."""
+    from pioneer.sim.scenarios import scenario_base
+
+    return scenario_base(scenario).removesuffix("-r03")
+
+
+def shipped_demos(scenario: str) -> Path:
+    """Path of the shipped demonstration file for ``scenario``."""
+    p = DEMOS_DIR / f"{base_scenario(scenario)}.npz"
+    if not p.is_file():
+        names = sorted(q.stem for q in DEMOS_DIR.glob("*.npz"))
+        raise DataError(
+            expect(
+                "shipped demos",
+                f"one of {names}",
+                scenario,
+                "pass your own demos/reward file, or give the variant a built-in 'base'",
+            )
+        )
+    return p
+
+
+def shipped_student(scenario: str, kind: str = "mdn") -> Path:
+    """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``."""
+    p = STUDENTS_DIR / f"{base_scenario(scenario)}-{kind}.safetensors"
+    if not p.is_file():
+        names = sorted(q.stem for q in STUDENTS_DIR.glob("*.safetensors"))
+        raise DataError(
+            expect(
+                "shipped student",
+                f"one of {names}",
+                f"{scenario}-{kind}",
+                "train one with `pioneer distill` and pass checkpoint=PATH, or give the variant"
+                " a built-in 'base'",
+            )
+        )
+    return p
+
+
+def shipped_crowdnav_weights(scenario: str) -> Path:
+    """Path of the shipped CrowdNav++ weights for ``scenario`` (``baselines/crowdnav-NAME``)."""
+    name = base_scenario(scenario)
+    p = BASELINES_DIR / f"crowdnav-{name}.safetensors"
+    if not p.is_file():
+        names = sorted(
+            q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors")
+        )
+        raise DataError(
+            expect(
+                "CrowdNav++ shipped weights",
+                f"a scenario among {names}",
+                scenario,
+                f"train them (pioneer train crowdnav++ --scenario {scenario} --out DIR) and "
+                "pass weights=DIR/policy.safetensors",
+            )
+        )
+    return p

@@ -1,0 +1,68 @@
+"""Mixture-density read-outs in plain numpy: decision and uncertainty (SPEC 6).
+
+The same formulas as :func:`pioneer.learn.models.uncertainty` (torch), for processes that
+must not import torch (the robot runtime, analysis scripts). With mixture weights
+π = softmax(logits), component means μ_k ∈ R² and diagonal standard deviations σ_k ∈ R², the
+law of total variance, summed over the two action dimensions d, splits the predictive variance
+into
+
+    aleatoric  = Σ_k π_k Σ_d σ_kd²                       (expected within-component variance)
+    epistemic  = Σ_k π_k ‖μ_k − Σ_j π_j μ_j‖²            (variance of the component means)
+
+(Choi et al., ICRA 2018, arXiv 1709.02249). Units: (m/s)² + (rad/s)², as the paper sums them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.errors import ConfigError, expect
+
+__all__ = ["ACTION_MODES", "mixture_action", "mixture_uncertainty", "softmax"]
+
+ACTION_MODES = ("mode", "mean")
+
+
+def softmax(logits: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Numerically stable softmax over the last axis (float64), shape of ``logits``."""
+    z = np.asarray(logits, dtype=np.float64)
+    z = z - z.max(axis=-1, keepdims=True)
+    e = np.exp(z)
+    out: NDArray[np.float64] = e / e.sum(axis=-1, keepdims=True)
+    return out
+
+
+def mixture_uncertainty(
+    logits: NDArray[np.floating], mu: NDArray[np.floating], sigma: NDArray[np.floating]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(aleatoric, epistemic)``, each ``(N,)``, from logits ``(N, K)``, means ``(N, K, D)``
+    and standard deviations ``(N, K, D)`` of a diagonal Gaussian mixture (module docstring)."""
+    pi = softmax(logits)
+    m = np.asarray(mu, dtype=np.float64)
+    s = np.asarray(sigma, dtype=np.float64)
+    aleatoric = np.sum(pi * np.sum(s * s, axis=-1), axis=-1)
+    mbar = np.sum(pi[..., None] * m, axis=-2)
+    epistemic = np.sum(pi * np.sum((m - mbar[..., None, :]) ** 2, axis=-1), axis=-1)
+    return aleatoric, epistemic
+
+
+def mixture_action(
+    logits: NDArray[np.floating], mu: NDArray[np.floating], mode: str = "mode"
+) -> NDArray[np.float64]:
+    """The deterministic action ``(N, D)`` of a mixture.
+
+    ``"mode"`` (the default, SPEC 6): the mean of the most probable component — a command the
+    teacher actually gave in similar situations, never the average of two distinct manoeuvres
+    (passing left vs right averages to driving straight into the human). ``"mean"``: the
+    mixture mean Σ_k π_k μ_k, smoother but prone to exactly that averaging.
+    """
+    m = np.asarray(mu, dtype=np.float64)
+    if mode == "mode":
+        k = np.argmax(np.asarray(logits), axis=-1)
+        out: NDArray[np.float64] = np.take_along_axis(m, k[..., None, None], axis=-2)[..., 0, :]
+        return out
+    if mode == "mean":
+        mean: NDArray[np.float64] = np.sum(softmax(logits)[..., None] * m, axis=-2)
+        return mean
+    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))

@@ -1,0 +1,128 @@
+"""Run one episode of a policy in a scenario and record what happened."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.control.policy import Policy
+from pioneer.sim.env import NavEnv
+from pioneer.sim.scenarios import ScenarioConfig
+from pioneer.sim.world import State, World
+
+__all__ = ["EpisodeRecord", "Trajectory", "run_episode"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """States of one episode, for plots and animations."""
+
+    world: World
+    states: list[State]  # the state after reset, then after every step (B = 1 each)
+
+    @property
+    def robot(self) -> NDArray[np.float64]:
+        """Robot poses, shape ``(T, 3)``."""
+        return np.stack([s.robot[0] for s in self.states])
+
+    @property
+    def humans(self) -> NDArray[np.float64]:
+        """Human positions, shape ``(T, N, 2)``."""
+        return np.stack([s.h_pos[0] for s in self.states])
+
+
+@dataclasses.dataclass(frozen=True)
+class EpisodeRecord:
+    """Outcome and metrics of one episode (JSON-serialisable via ``to_dict``)."""
+
+    scenario: str
+    policy: str
+    seed: int
+    event: str  # "success", "collision" or "timeout"
+    time_s: float
+    path_length_m: float
+    min_clearance_m: float  # minimum over the episode (inf if no humans)
+    time_close_s: float  # time with clearance below 0.8 m
+    steps: int
+    # Per-frame series of policies that report uncertainty (students): "clearance" [m] at
+    # decision time, "aleatoric" and "epistemic" [(m/s)² + (rad/s)²], and for a shield
+    # "shielded" (0/1). None for other policies.
+    frames: dict[str, list[float]] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict; an infinite clearance becomes ``None``; no ``frames`` key without
+        frames; frame values rounded to 6 significant digits (a compact JSON line)."""
+        d = dataclasses.asdict(self)
+        if not math.isfinite(d["min_clearance_m"]):
+            d["min_clearance_m"] = None
+        if self.frames is None:
+            del d["frames"]
+        else:
+            d["frames"] = {k: [_compact(x) for x in v] for k, v in self.frames.items()}
+        return d
+
+
+def _compact(x: float) -> float | None:
+    """``x`` to 6 significant digits; non-finite (inf clearance, NaN) → ``None``."""
+    return float(f"{x:.6g}") if math.isfinite(x) else None
+
+
+def _frame_series(policy: Policy, clearance: list[float]) -> dict[str, list[float]] | None:
+    """The per-frame series of a policy that reports ``uncertainty`` (one pair per step)."""
+    unc = getattr(policy, "uncertainty", None)
+    if unc is None or len(unc) != len(clearance):
+        return None
+    out = {
+        "clearance": clearance,
+        "aleatoric": [float(a) for a, _ in unc],
+        "epistemic": [float(e) for _, e in unc],
+    }
+    shielded = getattr(policy, "shielded", None)
+    if shielded is not None and len(shielded) == len(clearance):
+        out["shielded"] = [float(s) for s in shielded]
+    return out
+
+
+def run_episode(
+    scenario: str | ScenarioConfig,
+    policy: Policy,
+    seed: int,
+    record: bool = False,
+    close_threshold: float = 0.8,
+) -> tuple[EpisodeRecord, Trajectory | None]:
+    """Run ``policy`` for one episode seeded by ``seed``; optionally keep every state."""
+    env = NavEnv(scenario)
+    obs, info = env.reset(seed=seed)
+    policy.reset(info, np.random.default_rng(seed))
+    states = [env.state] if record else []
+    dt = env.scenario.sim.dt
+    close = 0.0
+    steps = 0
+    event = None
+    decision_clearance: list[float] = []  # clearance of the state each command was chosen in
+    while event is None:
+        decision_clearance.append(float(info["min_clearance"]))
+        obs, _, _, _, info = env.step(policy.act(obs, info))
+        steps += 1
+        if info["min_clearance"] < close_threshold:
+            close += dt
+        if record:
+            states.append(env.state)
+        event = info["event"]
+    rec = EpisodeRecord(
+        scenario=env.scenario.name,
+        policy=policy.name,
+        seed=seed,
+        event=event,
+        time_s=info["time"],
+        path_length_m=info["path_length"],
+        min_clearance_m=info["episode_min_clearance"],
+        time_close_s=close,
+        steps=steps,
+        frames=_frame_series(policy, decision_clearance),
+    )
+    return rec, (Trajectory(env.world, states) if record else None)

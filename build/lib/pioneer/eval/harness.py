@@ -1,0 +1,357 @@
+"""The evaluation harness: N seeds × M trials per scenario and policy, in parallel, resumable.
+
+Every episode is identified by (scenario, policy label, seed, trial); its environment seed is
+derived deterministically from (scenario, seed, trial), so any episode can be replayed alone
+(`episode_seed`) and every policy meets the same initial states. Finished episodes are
+appended to ``episodes.jsonl`` by the parent process as they arrive (one JSON object a line,
+flushed and fsynced), so an interrupted run resumes where it stopped; a malformed line is
+reported with its line number, never skipped. Backends: local processes (default) or a Ray
+cluster (extra ``distributed``). ``scenarios.json`` records the full config of every scenario
+evaluated into the folder; resuming with a scenario whose definition changed under the same
+name (an edited scenario file) is refused, so one table never mixes two layouts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from pioneer.errors import ConfigError, DataError, expect
+
+__all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
+
+EPISODES_FILE = "episodes.jsonl"
+SCENARIOS_FILE = "scenarios.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicySpec:
+    """A policy by registered name, its keyword arguments (JSON-able) and its row label."""
+
+    name: str
+    kwargs: tuple[tuple[str, Any], ...] = ()
+    label: str = ""
+
+    @property
+    def row(self) -> str:
+        """The label used in records and tables."""
+        return self.label or self.name
+
+    @classmethod
+    def make(cls, name: str, label: str = "", **kwargs: Any) -> PolicySpec:
+        """Convenience constructor with keyword arguments."""
+        return cls(name, tuple(sorted(kwargs.items())), label)
+
+    @classmethod
+    def parse(cls, text: str) -> PolicySpec:
+        """``NAME`` or ``NAME:key=value,key=value`` (the CLI's ``--policy`` syntax).
+
+        Values are read as JSON when they parse (``0.5``, ``true``, ``"x"``), else taken as
+        text (paths); ``label=`` names the row. E.g.
+        ``student-mdn:checkpoint=runs/d/student.safetensors,action_mode=mean,label=mine``.
+        """
+        name, sep, rest = text.partition(":")
+        fix = "write NAME or NAME:key=value,key=value (e.g. student-mdn:checkpoint=PATH)"
+        if not name.strip() or (sep and not rest.strip()):
+            raise ConfigError(expect("policy", "NAME[:key=value,…]", text, fix))
+        kwargs: dict[str, Any] = {}
+        for item in rest.split(",") if rest else []:
+            key, eq, raw = item.partition("=")
+            key = key.strip()
+            if not eq or not key.isidentifier() or key in kwargs:
+                raise ConfigError(
+                    expect(f"policy {name!r} parameter", "a new key=value", item.strip(), fix)
+                )
+            try:
+                value = json.loads(raw)
+            except json.JSONDecodeError:
+                value = raw
+            if isinstance(value, dict):
+                raise ConfigError(
+                    expect(f"policy {name!r} parameter {key!r}", "a number, text or list", raw, fix)
+                )
+            kwargs[key] = tuple(value) if isinstance(value, list) else value  # hashable
+        label = kwargs.pop("label", "")
+        return cls(name.strip(), tuple(sorted(kwargs.items())), str(label))
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """One episode to run."""
+
+    scenario: str
+    policy: PolicySpec
+    seed: int
+    trial: int
+
+    @property
+    def key(self) -> tuple[str, str, int, int]:
+        """Identity of the episode in ``episodes.jsonl``."""
+        return (self.scenario, self.policy.row, self.seed, self.trial)
+
+
+def episode_seed(scenario: str, seed: int, trial: int) -> int:
+    """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` (deterministic)."""
+    ss = np.random.SeedSequence([zlib.crc32(scenario.encode()), int(seed), int(trial)])
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+# ------------------------------------------------------------------------------ worker side
+_POLICY_CACHE: dict[tuple[str, PolicySpec], Any] = {}
+
+
+def _make_policy(spec: PolicySpec, scenario: str) -> Any:
+    key = (scenario, spec)
+    if key not in _POLICY_CACHE:
+        import pioneer.control  # noqa: F401  (registers the policies)
+        from pioneer.control.policy import build_policy
+
+        pol = build_policy(spec.name, scenario, **dict(spec.kwargs))
+        if spec.label:
+            pol.name = spec.label
+        _POLICY_CACHE[key] = pol
+    return _POLICY_CACHE[key]
+
+
+def _worker_init() -> None:
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Run one episode and return its JSON-able record."""
+    from pioneer.eval.episode import run_episode
+
+    policy = _make_policy(task.policy, task.scenario)
+    t0 = time.perf_counter()
+    rec, _ = run_episode(task.scenario, policy, episode_seed(task.scenario, task.seed, task.trial))
+    wall = time.perf_counter() - t0
+    d = rec.to_dict()
+    d.update(
+        policy=task.policy.row,
+        seed=task.seed,
+        trial=task.trial,
+        episode_seed=episode_seed(task.scenario, task.seed, task.trial),
+        wall_time_s=wall,
+        decision_ms=1000.0 * wall / max(rec.steps, 1),
+    )
+    return d
+
+
+# ------------------------------------------------------------------------------ records file
+def read_records(path: str | Path) -> list[dict[str, Any]]:
+    """All records of an ``episodes.jsonl``; a malformed line raises :class:`DataError`.
+
+    A last line without a newline (a write cut by a crash) is dropped with a warning on
+    stderr, since its episode will simply be run again.
+    """
+    p = Path(path)
+    if not p.exists():
+        return []
+    text = p.read_text()
+    lines = text.split("\n")
+    partial = lines[-1] if lines[-1] else None
+    out = []
+    for i, line in enumerate(lines[:-1], start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "one JSON record",
+                    line[:60],
+                    "delete or repair that line, then resume",
+                )
+            ) from exc
+        if not isinstance(rec, dict):
+            raise DataError(
+                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
+            )
+        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
+        if missing:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "fields scenario/policy/seed/trial/event",
+                    sorted(missing),
+                    "delete that line",
+                )
+            )
+        out.append(rec)
+    if partial is not None:
+        import sys
+
+        print(
+            f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
+            file=sys.stderr,
+        )
+        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
+            fh.write("\n".join(lines[:-1]) + ("\n" if len(lines) > 1 else ""))
+    return out
+
+
+def _append(fh: Any, rec: dict[str, Any]) -> None:
+    fh.write(json.dumps(rec) + "\n")
+    fh.flush()
+    os.fsync(fh.fileno())
+
+
+# ------------------------------------------------------------------------------ driver
+def _tasks(
+    scenarios: Sequence[str], policies: Sequence[PolicySpec], seeds: int, trials: int
+) -> list[Task]:
+    return [
+        Task(sc, pol, s, t)
+        for sc in scenarios
+        for pol in policies
+        for s in range(seeds)
+        for t in range(trials)
+    ]
+
+
+def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
+    if workers <= 1:
+        for t in tasks:
+            yield run_task(t)
+        return
+    from pioneer.parallel import bounded_map, spawn_pool
+
+    with spawn_pool(workers, _worker_init) as pool:
+        yield from bounded_map(pool, run_task, tasks, 4 * workers)
+
+
+def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
+    try:
+        import ray
+    except ImportError as exc:
+        raise ConfigError(
+            expect(
+                "backend",
+                "ray installed",
+                "not installed",
+                "pip install 'pioneer-nav[distributed]'",
+            )
+        ) from exc
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    from pioneer.sim.scenarios import SCENARIOS_ENV
+
+    files = os.environ.get(SCENARIOS_ENV)  # scenario files: the same paths on every node
+    remote = (
+        ray.remote(runtime_env={"env_vars": {SCENARIOS_ENV: files}})(run_task)
+        if files
+        else ray.remote(run_task)
+    )
+    refs = [remote.remote(t) for t in tasks]
+    while refs:
+        done, refs = ray.wait(refs, num_returns=1)
+        yield ray.get(done[0])
+
+
+def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
+    """Fail before running anything when a policy would load a shipped part the scenario does
+    not have (demos for the teacher's default reward, a student, CrowdNav++ weights) — without
+    building the policies (no torch in the parent)."""
+    from pioneer.data import shipped_crowdnav_weights, shipped_demos, shipped_student
+
+    for sc in scenarios:
+        for spec in policies:
+            kw = dict(spec.kwargs)
+            name = spec.name
+            if name in ("student-mdn", "student-mlp", "student-shield") and not kw.get(
+                "checkpoint"
+            ):
+                shipped_student(sc, "mlp" if name == "student-mlp" else "mdn")
+            teacher = name in ("teacher", "teacher-no-goal", "teacher-no-obstacle")
+            shield_teacher = (
+                name == "student-shield"
+                and kw.get("mode", "handover") == "handover"
+                and kw.get("fallback", "teacher") == "teacher"
+            )
+            if ((teacher and kw.get("density", True)) or shield_teacher) and not kw.get("reward"):
+                shipped_demos(sc)
+            if name == "crowdnav++" and not kw.get("weights"):
+                shipped_crowdnav_weights(sc)
+
+
+def _record_scenarios(out: Path, names: Sequence[str]) -> None:
+    """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
+    from pioneer.io import write_text_atomic
+    from pioneer.sim.scenarios import pin_scenario
+
+    p = out / SCENARIOS_FILE
+    try:
+        known: dict[str, Any] = json.loads(p.read_text()) if p.exists() else {}
+    except json.JSONDecodeError as exc:
+        raise DataError(
+            expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
+        ) from exc
+    mine = {n: pin_scenario(n, known.get(n), str(out)) for n in names}
+    if any(n not in known for n in mine):
+        write_text_atomic(p, json.dumps({**known, **mine}, indent=1) + "\n")
+
+
+def evaluate(
+    scenarios: Sequence[str],
+    policies: Sequence[PolicySpec],
+    seeds: int,
+    trials: int,
+    out_dir: str | Path,
+    workers: int | None = None,
+    backend: str = "process",
+    ray_address: str | None = None,
+    progress: bool = True,
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run (or resume) the evaluation; returns every record (old and new)."""
+    if seeds < 1 or trials < 1:
+        raise ConfigError(
+            expect("seeds/trials", "integers >= 1", (seeds, trials), "fix the counts")
+        )
+    if backend not in ("process", "ray"):
+        raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
+    import pioneer.control  # noqa: F401  (registers the policies)
+    from pioneer.control.policy import check_policy_name
+    from pioneer.sim.scenarios import get_scenario
+
+    for sc in scenarios:  # fail before running anything, not hours in
+        get_scenario(sc)
+    for spec in policies:
+        check_policy_name(spec.name)
+    _check_shipped_parts(scenarios, policies)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _record_scenarios(out, scenarios)
+    path = out / EPISODES_FILE
+    records = read_records(path)
+    done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
+    todo = [t for t in _tasks(scenarios, policies, seeds, trials) if t.key not in done]
+    n_workers = workers or os.cpu_count() or 1
+    stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
+    total = len(done) + len(todo)
+    with (
+        open(path, "a") as fh,
+        tqdm(
+            total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
+        ) as bar,
+    ):
+        for rec in stream:
+            _append(fh, rec)
+            records.append(rec)
+            if on_record is not None:
+                on_record(rec)
+            bar.update(1)
+    return records

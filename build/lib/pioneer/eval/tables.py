@@ -1,0 +1,152 @@
+"""Tables laid out like the paper's, with the paper's numbers beside ours (Markdown and CSV)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+__all__ = ["PAPER", "TableRow", "csv_table", "markdown_table", "table_rows"]
+
+# Paper values: (SR %, TT s, PL m) per (table, scenario, row label). Tables I–III.
+PAPER: dict[tuple[str, str, str], tuple[float, float, float]] = {
+    ("I", "hr-rl", "teacher"): (99.4, 12.24, 3.74),
+    ("I", "hr-rl", "cvar-bf"): (72.8, 12.82, 4.65),
+    ("I", "hr-rl", "crowdnav++"): (78.6, 17.52, 4.93),
+    ("I", "hl-rr", "teacher"): (99.6, 12.94, 3.88),
+    ("I", "hl-rr", "cvar-bf"): (71.4, 12.82, 4.75),
+    ("I", "hl-rr", "crowdnav++"): (64.8, 9.71, 4.63),
+    ("II", "hr-rl", "teacher-no-density"): (83.0, 13.61, 4.55),
+    ("II", "hr-rl", "teacher-no-goal"): (99.4, 15.70, 3.79),
+    ("II", "hr-rl", "teacher-no-obstacle"): (94.8, 11.64, 3.72),
+    ("II", "hl-rr", "teacher-no-density"): (79.8, 13.37, 4.54),
+    ("II", "hl-rr", "teacher-no-goal"): (99.4, 16.48, 3.92),
+    ("II", "hl-rr", "teacher-no-obstacle"): (98.8, 12.33, 3.86),
+    ("III", "hr-rl", "student-mdn"): (98.0, 13.67, 4.62),
+    ("III", "hr-rl", "student-mlp"): (95.8, 15.02, 6.49),
+    ("III", "hl-rr", "student-mdn"): (100.0, 14.16, 4.70),
+    ("III", "hl-rr", "student-mlp"): (98.8, 15.29, 4.78),
+}
+
+TableRow = dict[str, Any]
+
+
+def _fmt(mean: float, ci: float, digits: int) -> str:
+    if mean is None or not math.isfinite(mean):
+        return "–"
+    return (
+        f"{mean:.{digits}f} ± {ci:.{digits}f}" if ci and math.isfinite(ci) else f"{mean:.{digits}f}"
+    )
+
+
+def table_rows(
+    table: str,
+    summary: Mapping[str, Mapping[str, Any]],
+    scenarios: Sequence[str],
+    policies: Sequence[str],
+) -> list[TableRow]:
+    """One row per (scenario, policy) present in ``summary``, with our and the paper's values."""
+    rows: list[TableRow] = []
+    for sc in scenarios:
+        for pol in policies:
+            s = summary.get(f"{sc}/{pol}")
+            if s is None:
+                continue
+            paper = PAPER.get((table, sc, pol))
+            rows.append(
+                {
+                    "scenario": sc,
+                    "method": pol,
+                    "episodes": s["episodes"],
+                    "sr": s["success_rate"],
+                    "tt": s["time_mean_s"],
+                    "pl": s["path_length_mean_m"],
+                    "collision": s["collision_rate"],
+                    "timeout": s["timeout_rate"],
+                    "min_clear": s["min_clearance_m"],
+                    "paper": paper,
+                }
+            )
+    return rows
+
+
+def markdown_table(rows: Sequence[TableRow], title: str) -> str:
+    """A Markdown table: SR, TT, PL (mean ± 95% CI over seeds) next to the paper's values."""
+    head = [
+        "Scenario",
+        "Method",
+        "SR ↑ (%)",
+        "TT ↓ (s)",
+        "PL ↓ (m)",
+        "paper SR / TT / PL",
+        "collisions (%)",
+        "timeouts (%)",
+        "min clearance (m)",
+        "episodes",
+    ]
+    out = [f"**{title}**", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        p = r["paper"]
+        cells = [
+            r["scenario"].upper(),
+            r["method"],
+            _fmt(r["sr"]["mean"], r["sr"]["ci95"], 1),
+            _fmt(r["tt"]["mean"], r["tt"]["ci95"], 2),
+            _fmt(r["pl"]["mean"], r["pl"]["ci95"], 2),
+            f"{p[0]:.1f} / {p[1]:.2f} / {p[2]:.2f}" if p else "–",
+            _fmt(r["collision"]["mean"], r["collision"]["ci95"], 1),
+            _fmt(r["timeout"]["mean"], r["timeout"]["ci95"], 1),
+            _fmt(r["min_clear"]["mean"], r["min_clear"]["ci95"], 2),
+            str(r["episodes"]),
+        ]
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
+def csv_table(rows: Sequence[TableRow], table: str) -> str:
+    """CSV with one line per row: our means, CI half-widths and the paper's values."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(
+        [
+            "table",
+            "scenario",
+            "method",
+            "episodes",
+            "sr",
+            "sr_ci95",
+            "tt_s",
+            "tt_ci95",
+            "pl_m",
+            "pl_ci95",
+            "collision_rate",
+            "timeout_rate",
+            "min_clearance_m",
+            "paper_sr",
+            "paper_tt_s",
+            "paper_pl_m",
+        ]
+    )
+    for r in rows:
+        p = r["paper"] or (None, None, None)
+        w.writerow(
+            [
+                table,
+                r["scenario"],
+                r["method"],
+                r["episodes"],
+                r["sr"]["mean"],
+                r["sr"]["ci95"],
+                r["tt"]["mean"],
+                r["tt"]["ci95"],
+                r["pl"]["mean"],
+                r["pl"]["ci95"],
+                r["collision"]["mean"],
+                r["timeout"]["mean"],
+                r["min_clear"]["mean"],
+                *p,
+            ]
+        )
+    return buf.getvalue()

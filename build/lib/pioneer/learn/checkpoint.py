@@ -1,0 +1,108 @@
+"""Safetensors checkpoints of torch modules with a typed config: one writer and one reader for
+the students and CrowdNav++ (weights as tensors; format tag, config and free-form ``info`` as
+JSON in the file's metadata — loading cannot execute code)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import torch
+from torch import nn
+
+from pioneer.errors import DataError, expect
+from pioneer.io import atomic_path
+
+__all__ = ["load_checked", "read_checkpoint", "write_checkpoint"]
+
+M = TypeVar("M", bound=nn.Module)
+
+
+def write_checkpoint(
+    model: nn.Module,
+    config: Mapping[str, Any],
+    path: str | Path,
+    fmt: str,
+    info: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write ``model``'s state dict to ``path`` (atomically) with ``fmt``, ``config`` and
+    ``info`` in the metadata; returns the path."""
+    from safetensors.torch import save
+
+    tensors = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    meta = {
+        "format": fmt,
+        "config": json.dumps(dict(config)),
+        "info": json.dumps(dict(info or {})),
+        "torch": torch.__version__,
+        # The kernels torch picked on this CPU: float results, hence trained weights and the
+        # rollouts that follow them, match bit for bit only between machines where it agrees.
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+    }
+    target = Path(path)
+    with atomic_path(target) as tmp:
+        tmp.write_bytes(save(tensors, metadata=meta))
+    return target
+
+
+def read_checkpoint(
+    p: Path, fmt: str, what: str, fix: str, missing_fix: str, tensors: bool
+) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    """``({"format", "config", "info"}, tensors)`` of the checkpoint at ``p`` (no tensors when
+    ``tensors`` is false). A missing, unreadable or foreign file, or bad metadata, raises one
+    :class:`DataError` naming ``what`` and the ``fix`` (``missing_fix`` for a missing file)."""
+    from safetensors import SafetensorError, safe_open
+
+    if not p.is_file():
+        raise DataError(expect(what, "an existing file", str(p), missing_fix))
+    try:
+        with safe_open(str(p), framework="pt") as fh:
+            raw = dict(fh.metadata() or {})
+            arrays = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118
+    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+        raise DataError(
+            expect(f"{what} {p}", "a readable .safetensors file", f"{exc}", fix)
+        ) from exc
+    if raw.get("format") != fmt:
+        raise DataError(expect(f"{p}: format", fmt, raw.get("format"), fix))
+    try:
+        meta = {
+            "format": raw["format"],
+            "config": json.loads(raw["config"]),
+            "info": json.loads(raw.get("info", "{}")),
+        }
+    except (KeyError, json.JSONDecodeError) as exc:
+        raise DataError(expect(f"{p}: metadata", "JSON 'config'", "missing/invalid", fix)) from exc
+    return meta, arrays
+
+
+def load_checked(
+    model: M, arrays: Mapping[str, torch.Tensor], p: Path, built_from: str, fix: str
+) -> M:
+    """Load ``arrays`` into ``model`` (built from the checkpoint's config, described by
+    ``built_from``) and return it in eval mode, after checking that the tensors are exactly the
+    model's (names and shapes) and finite float32; otherwise one :class:`DataError` listing the
+    missing, unexpected and mis-shaped tensors, or the first bad one."""
+    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+    received = {k: tuple(v.shape) for k, v in arrays.items()}
+    if expected != received:
+        diff = {
+            "missing": sorted(set(expected) - set(received)),
+            "unexpected": sorted(set(received) - set(expected)),
+            "shape": sorted(k for k in set(expected) & set(received) if expected[k] != received[k]),
+        }
+        raise DataError(
+            expect(
+                f"{p}: tensors",
+                f"those of {built_from}",
+                diff,
+                f"the weights do not match the stored config; {fix}",
+            )
+        )
+    for k, v in arrays.items():
+        if v.dtype != torch.float32 or not bool(torch.isfinite(v).all()):
+            raise DataError(expect(f"{p}: {k}", "finite float32", str(v.dtype), fix))
+    model.load_state_dict(dict(arrays), strict=True)
+    return model.eval()

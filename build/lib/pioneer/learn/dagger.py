@@ -1,0 +1,442 @@
+"""DAgger: distil the privileged teacher into a LiDAR-only student (paper §IV-B, SPEC 6).
+
+Round 0 collects ``teacher_episodes`` episodes driven by the teacher; each of the following
+``rounds`` collects ``episodes_per_round`` episodes driven by the latest student, and the
+teacher labels every state the student visits (Ross et al., AISTATS 2011, with β = 0 after
+round 0). All labelled frames are aggregated and the student is retrained after every round.
+
+Labels are the teacher's smoothed command u_t = α u* + (1 − α) u_{t−1} with u_{t−1} the command
+actually applied (so a frame's label is what the teacher would send had it been driving).
+
+Output directory (everything written atomically; a rerun of the same command resumes)::
+
+    DIR/config.json                      the DaggerConfig (a rerun must match it)
+    DIR/scenario.json                    the scenario's full config (a rerun must match it)
+    DIR/reward.npz                       the teacher's density reward
+    DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, clearance, …)
+    DIR/rounds/round-RR/student.safetensors   the student trained after round RR
+    DIR/curves.csv, DIR/curves.png       loss and student success per round
+    DIR/student.safetensors              the final student (= last round's)
+
+Episode seeds come from their own seed sequence (``"dagger"``, scenario, seed, round,
+episode), disjoint from the evaluation seeds of :func:`pioneer.eval.harness.episode_seed`.
+
+Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds
+continue from the previous round's weights for ``epochs_per_round`` epochs over the whole
+aggregate (warm start — a documented shortcut that keeps a full run within minutes).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import io
+import json
+import math
+import os
+import zlib
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from pioneer.config import Config
+from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.errors import ConfigError, expect
+from pioneer.io import atomic_path, load_npz, write_text_atomic
+from pioneer.learn.models import (
+    MDN,
+    Student,
+    StudentConfig,
+    build_student,
+    load_student,
+    save_student,
+    train_student,
+)
+from pioneer.parallel import bounded_map, spawn_pool
+
+__all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "dagger_seed", "run_dagger"]
+
+CONFIG_FILE = "config.json"
+SCENARIO_FILE = "scenario.json"
+FINAL_FILE = "student.safetensors"
+QUANTILES = (0.5, 0.9, 0.95, 0.99)
+
+
+@dataclasses.dataclass(frozen=True)
+class DaggerConfig(Config):
+    """A DAgger run (defaults = SPEC 6: 50 teacher episodes + 10 rounds × 50)."""
+
+    scenario: str = "hr-rl"
+    student: str = "mdn"  # "mdn" | "mlp"
+    action_mode: str = "mode"  # MDN's deterministic action in rollouts and checkpoint
+    nll_beta: float = 0.0  # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
+    teacher_episodes: int = 50  # round 0, driven by the teacher
+    rounds: int = 10  # student-driven rounds after round 0
+    episodes_per_round: int = 50
+    epochs_initial: int = 40  # training epochs after round 0 (fresh network)
+    epochs_per_round: int = 10  # epochs over the aggregate after each later round (warm start)
+    batch: int = 256
+    lr: float = 1e-3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.student not in ("mdn", "mlp"):
+            raise ConfigError(expect("student", "'mdn' or 'mlp'", self.student, "pick one"))
+        if self.action_mode not in ACTION_MODES:
+            raise ConfigError(
+                expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")
+            )
+        for name in ("teacher_episodes", "episodes_per_round", "epochs_initial", "batch"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ConfigError(expect(name, "an integer >= 1", v, f"set {name} >= 1"))
+        for name in ("rounds", "epochs_per_round", "seed"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 0):
+                raise ConfigError(expect(name, "an integer >= 0", v, f"set {name} >= 0"))
+        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
+            raise ConfigError(expect("nll_beta", "a number in [0, 1]", self.nll_beta, "use 1.0"))
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise ConfigError(expect("lr", "a finite number > 0", self.lr, "use 1e-3"))
+
+    def episodes_in(self, rnd: int) -> int:
+        """Episodes collected in round ``rnd``."""
+        return self.teacher_episodes if rnd == 0 else self.episodes_per_round
+
+
+@dataclasses.dataclass(frozen=True)
+class DaggerResult:
+    """Where the run wrote its outputs, and its per-round curve."""
+
+    out: Path
+    student: Path
+    curves: list[dict[str, Any]]
+
+
+def dagger_seed(scenario: str, seed: int, rnd: int, episode: int) -> int:
+    """The environment seed of ``episode`` in round ``rnd`` (disjoint from evaluation seeds)."""
+    ss = np.random.SeedSequence(
+        [zlib.crc32(b"dagger"), zlib.crc32(scenario.encode()), seed, rnd, episode]
+    )
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+# ------------------------------------------------------------------------------ worker side
+_CACHE: dict[tuple[str, str], Any] = {}
+
+
+def _teacher(scenario: str, reward: str) -> Any:
+    key = ("teacher", f"{scenario}:{reward}")
+    if key not in _CACHE:
+        from pioneer.control.teacher import make_teacher
+
+        _CACHE[key] = make_teacher(scenario, reward=reward)
+    return _CACHE[key]
+
+
+def _student(checkpoint: str) -> Any:
+    st = os.stat(checkpoint)  # a rewritten file (a recreated run folder) is a new student
+    key = ("student", f"{checkpoint}:{st.st_mtime_ns}:{st.st_size}")
+    if key not in _CACHE:
+        from pioneer.learn.policy import make_student_policy
+
+        for old in [k for k in _CACHE if k[0] == "student"]:  # keep only this round's student
+            del _CACHE[old]
+        _CACHE[key] = make_student_policy(checkpoint)
+    return _CACHE[key]
+
+
+def collect_episode(
+    scenario: str, reward: str, checkpoint: str | None, env_seed: int
+) -> dict[str, Any]:
+    """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
+    teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
+    labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
+    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
+    from pioneer.sim.env import NavEnv
+
+    teacher = _teacher(scenario, reward)
+    student = _student(checkpoint) if checkpoint is not None else None
+    env = NavEnv(scenario)
+    obs, info = env.reset(seed=env_seed)
+    rng = np.random.default_rng(env_seed)
+    teacher.reset(info, rng)
+    if student is not None:
+        student.reset(info, rng)
+    rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
+    event = None
+    while event is None:
+        state = info["state"]
+        label = teacher.decide(info["world"], state, prev=state.command[0]).command
+        u = label if student is None else student.act(obs, info)
+        rows_obs.append(np.asarray(obs, dtype=np.float32))
+        rows_lab.append(label)
+        rows_app.append(np.asarray(u, dtype=np.float64))
+        rows_clear.append(info["min_clearance"])
+        obs, _, _, _, info = env.step(u)
+        event = info["event"]
+    n = len(rows_obs)
+    unc = (
+        np.asarray(student.uncertainty, dtype=np.float64).reshape(n, 2)
+        if student is not None
+        else np.full((n, 2), np.nan)
+    )
+    return {
+        "obs": np.stack(rows_obs),
+        "action": np.stack(rows_lab).astype(np.float32),
+        "applied": np.stack(rows_app).astype(np.float32),
+        "clearance": np.asarray(rows_clear, dtype=np.float64),
+        "aleatoric": unc[:, 0],
+        "epistemic": unc[:, 1],
+        "event": np.array(event),
+        "time_s": np.array(float(info["time"])),
+        "env_seed": np.array(env_seed, dtype=np.int64),
+    }
+
+
+def _collect_task(args: tuple[str, str, str | None, int, str]) -> str:
+    scenario, reward, checkpoint, env_seed, path = args
+    ep = collect_episode(scenario, reward, checkpoint, env_seed)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **ep)
+    return path
+
+
+def _worker_init() -> None:
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+    torch.set_num_threads(1)
+
+
+# ------------------------------------------------------------------------------ driver
+def _round_dir(out: Path, rnd: int) -> Path:
+    return out / "rounds" / f"round-{rnd:02d}"
+
+
+def _episode_path(out: Path, rnd: int, i: int) -> Path:
+    return _round_dir(out, rnd) / f"ep-{i:03d}.npz"
+
+
+def _run_parallel(
+    tasks: list[tuple[str, str, str | None, int, str]],
+    pool: ProcessPoolExecutor | None,
+    workers: int,
+) -> Iterator[str]:
+    """Collect ``tasks`` in ``pool`` (in this process when ``None``), yielding as they finish."""
+    if pool is None:
+        for t in tasks:
+            yield _collect_task(t)
+        return
+    yield from bounded_map(pool, _collect_task, tasks, 2 * workers)
+
+
+def _pool(workers: int) -> contextlib.AbstractContextManager[ProcessPoolExecutor | None]:
+    """One process pool for the whole run (workers keep the teacher loaded between rounds)."""
+    if workers <= 1:
+        _worker_init()
+        return contextlib.nullcontext()
+    return spawn_pool(workers, _worker_init)
+
+
+def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
+    """The ``n`` episodes of round ``rnd`` (all must exist)."""
+    fix = "delete that file and rerun the command (it will be collected again)"
+    return [load_npz(_episode_path(out, rnd, i), "DAgger episode", fix) for i in range(n)]
+
+
+def _check_config(out: Path, cfg: DaggerConfig) -> None:
+    p = out / CONFIG_FILE
+    if p.exists():
+        old = {**DaggerConfig().to_dict(), **json.loads(p.read_text())}  # older runs: defaults
+        mine = cfg.to_dict()
+        fixed = {k: v for k, v in mine.items() if k != "rounds"}
+        if {k: v for k, v in old.items() if k != "rounds"} != fixed:
+            diff = sorted(k for k in fixed if old.get(k) != fixed[k])
+            raise ConfigError(
+                expect(
+                    f"{out}: DAgger settings",
+                    f"the settings of the run already there ({diff} differ)",
+                    {k: mine[k] for k in diff},
+                    "use the same options to resume, or a new --out directory",
+                )
+            )
+    write_text_atomic(p, json.dumps(cfg.to_dict(), indent=2) + "\n")
+
+
+def _check_scenario(out: Path, name: str) -> None:
+    """Record the scenario's full definition; a resumed run must see the same one."""
+    from pioneer.sim.scenarios import pin_scenario
+
+    p = out / SCENARIO_FILE
+    recorded = json.loads(p.read_text()) if p.exists() else None
+    mine = pin_scenario(name, recorded, str(out))
+    if recorded is None:
+        write_text_atomic(p, json.dumps(mine, indent=1) + "\n")
+
+
+def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:
+    if not isinstance(model, MDN):
+        return {}
+    with torch.inference_mode():
+        ale, epi = model.uncertainty(torch.as_tensor(obs))
+    return {
+        name: {str(q): float(np.quantile(v.numpy(), q)) for q in QUANTILES}
+        for name, v in (("aleatoric", ale), ("epistemic", epi))
+    }
+
+
+def _eval_loss(model: Student, obs: NDArray[np.float32], act: NDArray[np.float32]) -> float:
+    """Loss of ``model`` on frames it was not trained on (eval mode: dropout off)."""
+    with torch.inference_mode():
+        return float(model.loss(torch.as_tensor(obs), torch.as_tensor(act)))
+
+
+def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
+    if not rows:
+        return
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(out / "curves.csv", buf.getvalue())
+    from pioneer.viz.student import plot_dagger_curves
+
+    plot_dagger_curves(rows, out / "curves.png")
+
+
+def run_dagger(
+    config: DaggerConfig,
+    out_dir: str | Path,
+    workers: int | None = None,
+    reward: str | Path | None = None,
+    progress: bool = True,
+    on_round: Callable[[dict[str, Any]], None] | None = None,
+) -> DaggerResult:
+    """Run (or resume) DAgger; returns the final student's path and the per-round curve.
+
+    ``reward``: the teacher's density-reward file; default the reward fitted on the shipped
+    demonstrations of the scenario (saved to ``DIR/reward.npz``).
+    """
+    from pioneer.sim.scenarios import get_scenario
+
+    cfg = config
+    get_scenario(cfg.scenario)  # fail early on an unknown scenario
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_config(out, cfg)
+    _check_scenario(out, cfg.scenario)
+    reward_path = Path(reward) if reward is not None else out / "reward.npz"
+    if reward is None and not reward_path.exists():
+        from pioneer.control.teacher import default_reward
+
+        default_reward(cfg.scenario).save(reward_path)
+    n_workers = workers or os.cpu_count() or 1
+    # Train on one thread: float32 sums depend on the thread count, and the weights must not
+    # depend on --workers or the machine (the networks are small; threads gain little).
+    torch.set_num_threads(1)
+    _CACHE.clear()
+    total = cfg.teacher_episodes + cfg.rounds * cfg.episodes_per_round
+    done = sum(
+        _episode_path(out, r, i).exists()
+        for r in range(cfg.rounds + 1)
+        for i in range(cfg.episodes_in(r))
+    )
+    curves: list[dict[str, Any]] = []
+    agg_obs: list[NDArray[np.float32]] = []
+    agg_act: list[NDArray[np.float32]] = []
+    model = None
+    bar = tqdm(total=total, initial=done, desc="DAgger episodes", unit="ep", disable=not progress)
+    with bar, _pool(n_workers) as pool:
+        for rnd in range(cfg.rounds + 1):
+            rdir = _round_dir(out, rnd)
+            prev_ckpt = None if rnd == 0 else str(_round_dir(out, rnd - 1) / FINAL_FILE)
+            todo = [
+                (
+                    cfg.scenario,
+                    str(reward_path),
+                    prev_ckpt,
+                    dagger_seed(cfg.scenario, cfg.seed, rnd, i),
+                    str(_episode_path(out, rnd, i)),
+                )
+                for i in range(cfg.episodes_in(rnd))
+                if not _episode_path(out, rnd, i).exists()
+            ]
+            bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
+            for _ in _run_parallel(todo, pool, n_workers):
+                bar.update(1)
+            eps = load_round(out, rnd, cfg.episodes_in(rnd))
+            obs = np.concatenate([e["obs"] for e in eps]).astype(np.float32)
+            act = np.concatenate([e["action"] for e in eps]).astype(np.float32)
+            held_out = _eval_loss(model, obs, act) if model is not None else math.nan
+            agg_obs.append(obs)
+            agg_act.append(act)
+            x, y = np.concatenate(agg_obs), np.concatenate(agg_act)
+            ckpt = rdir / FINAL_FILE
+            if ckpt.exists():
+                model = load_student(ckpt)
+                history = [float(v) for v in json_info(ckpt).get("loss_history", [])]
+            else:
+                if model is None:
+                    model = build_student(
+                        StudentConfig(
+                            kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta
+                        ),
+                        seed=cfg.seed,
+                    )
+                epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
+                history = (
+                    train_student(
+                        model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
+                    )
+                    if epochs > 0
+                    else []
+                )
+            events = [str(e["event"]) for e in eps]
+            row = {
+                "round": rnd,
+                "driver": "teacher" if rnd == 0 else "student",
+                "episodes": len(eps),
+                "frames_total": int(x.shape[0]),
+                "success_rate": events.count("success") / len(events),
+                "collision_rate": events.count("collision") / len(events),
+                "mean_time_s": float(np.mean([float(e["time_s"]) for e in eps])),
+                "loss_new_data": held_out,
+                "train_loss": history[-1] if history else math.nan,
+            }
+            if not ckpt.exists():
+                info = {
+                    "scenario": cfg.scenario,
+                    "source": "dagger",
+                    "round": rnd,
+                    "dagger": cfg.to_dict(),
+                    "frames": int(x.shape[0]),
+                    "loss_history": history,
+                    "uncertainty_quantiles": _quantiles(model, x),
+                    "curve_row": row,
+                }
+                save_student(model, ckpt, info)
+            curves.append(row)
+            _write_curves(out, curves)
+            if on_round is not None:
+                on_round(row)
+    assert model is not None
+    final = out / FINAL_FILE
+    with atomic_path(final) as tmp:
+        tmp.write_bytes((_round_dir(out, cfg.rounds) / FINAL_FILE).read_bytes())
+    return DaggerResult(out, final, curves)
+
+
+def json_info(checkpoint: str | Path) -> dict[str, Any]:
+    """The free-form ``info`` stored in a student checkpoint."""
+    from pioneer.learn.models import read_checkpoint_meta
+
+    info = read_checkpoint_meta(checkpoint)["info"]
+    return dict(info) if isinstance(info, dict) else {}

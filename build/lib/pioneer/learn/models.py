@@ -1,0 +1,433 @@
+"""Student networks distilled from the teacher: MDN and MLP, training and checkpoints (SPEC 6).
+
+- :class:`MDN`: 29 → 128 → 128 (ReLU, dropout 0.1) → K = 10 diagonal Gaussian components:
+  mixture logits (softmax), means and standard deviations (softplus + floor); loss = negative
+  log-likelihood of the mixture (paper §IV-B; Choi et al., ICRA 2018).
+- :class:`MLPStudent`: the same trunk with 2 outputs and a mean-squared-error loss (baseline).
+- :func:`uncertainty`: the law-of-total-variance split into aleatoric and epistemic parts.
+- :func:`train_student`: Adam, lr 1e−3, batch 256, seeded; returns the loss history.
+- :func:`save_student` / :func:`load_student`: safetensors weights with the config as JSON in
+  the file's metadata — a checkpoint rebuilds its own model and cannot execute code.
+
+Choices and deviations from the paper:
+
+- Deterministic action: the mean of the most probable component (``action_mode="mode"``,
+  default); the mixture mean (``"mean"``) is an option. See
+  :func:`pioneer.deploy.mixture.mixture_action` for why.
+- Inputs are standardised and the action outputs are de-standardised by per-feature mean/std
+  buffers stored in the module (and so in the checkpoint and the ONNX graph). All outputs
+  (μ, σ, uncertainties) are therefore in physical units: v [m/s], ω [rad/s].
+- σ = softplus(raw) · action_std + ``sigma_floor`` (floor in physical units), so the NLL is
+  bounded below and cannot diverge on near-duplicate teacher labels.
+- ``nll_beta`` = β > 0 (off by default) trains the MDN with the β-NLL of Seitzer et al.
+  (ICLR 2022): each frame's NLL weighted by its detached total variance^β (standardised
+  units, weights scaled to mean 1). Measured in docs/student.md; not used by the shipped MDNs.
+- The MLP's MSE is taken on standardised actions so that v and ω weigh equally.
+- Randomness: weights are initialised from a ``torch.Generator`` seeded by ``seed``; training
+  shuffles with its own generator and runs dropout under a forked, seeded torch RNG, so neither
+  the global numpy RNG nor the caller's torch RNG state is used or changed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from numpy.typing import NDArray
+from torch import nn
+
+from pioneer.config import Config, check_nonnegative
+from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
+from pioneer.errors import ConfigError, DataError, PioneerError, expect
+from pioneer.learn.checkpoint import load_checked, read_checkpoint, write_checkpoint
+from pioneer.sim.lidar import OBS_DIM
+
+__all__ = [
+    "ACTION_DIM",
+    "CHECKPOINT_FORMAT",
+    "MDN",
+    "MLPStudent",
+    "Student",
+    "StudentConfig",
+    "build_student",
+    "load_student",
+    "mixture_action",
+    "mixture_uncertainty",
+    "read_checkpoint_meta",
+    "save_student",
+    "select_action",
+    "train_student",
+    "uncertainty",
+]
+
+ACTION_DIM = 2  # (v [m/s], ω [rad/s])
+CHECKPOINT_FORMAT = "pioneer.student/1"
+KINDS = ("mdn", "mlp")
+
+
+@dataclasses.dataclass(frozen=True)
+class StudentConfig(Config):
+    """Architecture of a student network (defaults = SPEC 6)."""
+
+    kind: str = "mdn"  # "mdn" (mixture density network) | "mlp" (regression baseline)
+    obs_dim: int = OBS_DIM  # input features (29-D observation, SPEC 1.4)
+    hidden: tuple[int, ...] = (128, 128)  # trunk widths, ReLU after each
+    dropout: float = 0.1  # after each hidden ReLU (training only)
+    n_components: int = 10  # K, mixture components (MDN only)
+    sigma_floor: float = 1e-3  # [m/s | rad/s] added to every component std (MDN only)
+    action_mode: str = "mode"  # deterministic action: "mode" | "mean" (see module docstring)
+    nll_beta: float = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ConfigError(
+                expect("StudentConfig.kind", f"one of {KINDS}", self.kind, "use 'mdn'")
+            )
+        if self.action_mode not in ACTION_MODES:
+            raise ConfigError(
+                expect(
+                    "StudentConfig.action_mode",
+                    f"one of {ACTION_MODES}",
+                    self.action_mode,
+                    "use 'mode'",
+                )
+            )
+        for name, value in (("obs_dim", self.obs_dim), ("n_components", self.n_components)):
+            if not (isinstance(value, int) and value >= 1):
+                raise ConfigError(
+                    expect(f"StudentConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
+                )
+        if not (len(self.hidden) >= 1 and all(isinstance(h, int) and h >= 1 for h in self.hidden)):
+            raise ConfigError(
+                expect("StudentConfig.hidden", "one or more widths >= 1", self.hidden, "(128, 128)")
+            )
+        if not (isinstance(self.dropout, int | float) and 0.0 <= self.dropout < 1.0):
+            raise ConfigError(
+                expect("StudentConfig.dropout", "a number in [0, 1)", self.dropout, "use 0.1")
+            )
+        check_nonnegative("StudentConfig", "sigma_floor", self.sigma_floor)
+        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
+            raise ConfigError(
+                expect("StudentConfig.nll_beta", "a number in [0, 1]", self.nll_beta, "use 0.5")
+            )
+
+
+# ---------------------------------------------------------------------------------- read-outs
+def uncertainty(
+    logits: torch.Tensor, mu: torch.Tensor, sigma: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(aleatoric, epistemic)``, each ``(N,)``, of a diagonal Gaussian mixture.
+
+    ``logits`` (N, K), ``mu`` and ``sigma`` (N, K, 2). Law of total variance summed over the
+    action dimensions: aleatoric = Σ_k π_k Σ_d σ_kd², epistemic = Σ_k π_k ‖μ_k − Σ_j π_j μ_j‖²;
+    their sum is the trace of the mixture's covariance. Numpy twin:
+    :func:`pioneer.deploy.mixture.mixture_uncertainty`.
+    """
+    pi = torch.softmax(logits, dim=-1)
+    aleatoric = (pi * (sigma * sigma).sum(dim=-1)).sum(dim=-1)
+    mbar = (pi.unsqueeze(-1) * mu).sum(dim=-2)
+    epistemic = (pi * ((mu - mbar.unsqueeze(-2)) ** 2).sum(dim=-1)).sum(dim=-1)
+    return aleatoric, epistemic
+
+
+def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") -> torch.Tensor:
+    """Deterministic action ``(N, 2)``: mean of the most probable component (``"mode"``) or the
+    mixture mean (``"mean"``). Written with ``gather`` so it exports to ONNX."""
+    if mode == "mode":
+        k = logits.argmax(dim=-1)  # (N,)
+        idx = k.view(-1, 1, 1).expand(-1, 1, ACTION_DIM)
+        return mu.gather(1, idx).squeeze(1)
+    if mode == "mean":
+        return (torch.softmax(logits, dim=-1).unsqueeze(-1) * mu).sum(dim=-2)
+    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))
+
+
+# ---------------------------------------------------------------------------------- networks
+def _linear(n_in: int, n_out: int, gen: torch.Generator) -> nn.Linear:
+    # PyTorch's default Linear init, drawn from ``gen`` instead of the global torch RNG.
+    layer: nn.Linear = nn.utils.skip_init(nn.Linear, n_in, n_out)
+    nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5.0), generator=gen)
+    bound = 1.0 / math.sqrt(n_in)
+    nn.init.uniform_(layer.bias, -bound, bound, generator=gen)
+    return layer
+
+
+class Student(nn.Module):
+    """Common base: the ReLU/dropout trunk and the normalisation buffers.
+
+    Buffers (saved with the weights): ``obs_mean``/``obs_std`` (obs_dim,) standardise inputs;
+    ``act_mean``/``act_std`` (2,) map the heads' standardised outputs to physical units.
+    """
+
+    config: StudentConfig
+    obs_mean: torch.Tensor
+    obs_std: torch.Tensor
+    act_mean: torch.Tensor
+    act_std: torch.Tensor
+
+    def __init__(self, config: StudentConfig, gen: torch.Generator) -> None:
+        super().__init__()
+        self.config = config
+        layers: list[nn.Module] = []
+        n_in = config.obs_dim
+        for width in config.hidden:
+            layers += [_linear(n_in, width, gen), nn.ReLU(), nn.Dropout(config.dropout)]
+            n_in = width
+        self.trunk = nn.Sequential(*layers)
+        self.register_buffer("obs_mean", torch.zeros(config.obs_dim))
+        self.register_buffer("obs_std", torch.ones(config.obs_dim))
+        self.register_buffer("act_mean", torch.zeros(ACTION_DIM))
+        self.register_buffer("act_std", torch.ones(ACTION_DIM))
+        self.eval()
+
+    @property
+    def kind(self) -> str:
+        """``"mdn"`` or ``"mlp"``."""
+        return self.config.kind
+
+    def set_normalizer(self, obs: torch.Tensor, actions: torch.Tensor) -> None:
+        """Fit the standardisation buffers to ``obs`` (N, obs_dim) and ``actions`` (N, 2);
+        near-constant features (std < 1e-6) keep scale 1."""
+        with torch.no_grad():
+            for x, mean, std in (
+                (obs, self.obs_mean, self.obs_std),
+                (actions, self.act_mean, self.act_std),
+            ):
+                s = x.std(dim=0, unbiased=False) if x.shape[0] > 1 else torch.ones_like(std)
+                mean.copy_(x.mean(dim=0))
+                std.copy_(torch.where(s < 1e-6, torch.ones_like(s), s))
+
+    def features(self, obs: torch.Tensor) -> torch.Tensor:
+        """Trunk output ``(N, hidden[-1])`` of standardised observations ``(N, obs_dim)``."""
+        out: torch.Tensor = self.trunk((obs - self.obs_mean) / self.obs_std)
+        return out
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Mean training loss over the batch (scalar)."""
+        raise NotImplementedError
+
+    def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
+        """The command ``(N, 2)`` (v [m/s], ω [rad/s]) the policy executes."""
+        raise NotImplementedError
+
+
+class MDN(Student):
+    """Mixture density network: ``forward(obs) -> (logits, mu, sigma)``.
+
+    Shapes: ``obs`` (N, obs_dim) float32; ``logits`` (N, K) unnormalised mixture log-weights;
+    ``mu`` (N, K, 2) component means and ``sigma`` (N, K, 2) component standard deviations,
+    both in physical units (v [m/s], ω [rad/s]).
+    """
+
+    def __init__(self, config: StudentConfig | None = None, seed: int = 0) -> None:
+        cfg = config or StudentConfig(kind="mdn")
+        if cfg.kind != "mdn":
+            raise ConfigError(expect("MDN config.kind", "'mdn'", cfg.kind, "use MLPStudent"))
+        gen = torch.Generator().manual_seed(int(seed))
+        super().__init__(cfg, gen)
+        k, h = cfg.n_components, cfg.hidden[-1]
+        self.logits_head = _linear(h, k, gen)
+        self.mu_head = _linear(h, k * ACTION_DIM, gen)
+        self.sigma_head = _linear(h, k * ACTION_DIM, gen)
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        h = self.features(obs)
+        shape = (-1, self.config.n_components, ACTION_DIM)
+        logits = self.logits_head(h)
+        mu = self.mu_head(h).view(shape) * self.act_std + self.act_mean
+        sigma = F.softplus(self.sigma_head(h)).view(shape) * self.act_std
+        return logits, mu, sigma + self.config.sigma_floor
+
+    def log_prob(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """log p(action | obs) ``(N,)`` under the mixture, via logsumexp (stable)."""
+        logits, mu, sigma = self(obs)
+        z = (actions.unsqueeze(1) - mu) / sigma  # (N, K, 2)
+        comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
+        return torch.logsumexp(torch.log_softmax(logits, dim=-1) + comp, dim=-1)
+
+    def nll(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Mean negative log-likelihood [nats per sample] of ``actions`` (N, 2) given ``obs``."""
+        return -self.log_prob(obs, actions).mean()
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """The training loss: :meth:`nll`, or with ``nll_beta`` = β > 0 the β-NLL."""
+        beta = float(self.config.nll_beta)
+        if beta == 0.0:
+            return self.nll(obs, actions)
+        logits, mu, sigma = self(obs)
+        z = (actions.unsqueeze(1) - mu) / sigma
+        comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
+        logp = torch.logsumexp(torch.log_softmax(logits, dim=-1) + comp, dim=-1)
+        with torch.no_grad():
+            ale, epi = uncertainty(logits, mu / self.act_std, sigma / self.act_std)
+            w = (ale + epi) ** beta
+            w = w / w.mean()
+        return -(w * logp).mean()
+
+    def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
+        """Mean of the most probable component (default) or the mixture mean, ``(N, 2)``."""
+        logits, mu, _ = self(obs)
+        return select_action(logits, mu, mode or self.config.action_mode)
+
+    def uncertainty(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(aleatoric, epistemic)`` per observation, each ``(N,)`` (see :func:`uncertainty`)."""
+        return uncertainty(*self(obs))
+
+
+class MLPStudent(Student):
+    """Regression baseline: ``forward(obs) -> action`` ``(N, 2)`` in physical units."""
+
+    def __init__(self, config: StudentConfig | None = None, seed: int = 0) -> None:
+        cfg = config or StudentConfig(kind="mlp")
+        if cfg.kind != "mlp":
+            raise ConfigError(expect("MLPStudent config.kind", "'mlp'", cfg.kind, "use MDN"))
+        gen = torch.Generator().manual_seed(int(seed))
+        super().__init__(cfg, gen)
+        self.head = _linear(cfg.hidden[-1], ACTION_DIM, gen)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        out: torch.Tensor = self.head(self.features(obs)) * self.act_std + self.act_mean
+        return out
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Mean squared error on standardised actions (v and ω weigh equally)."""
+        err = (self(obs) - actions) / self.act_std
+        return (err * err).mean()
+
+    def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
+        """The regressed command ``(N, 2)`` (``mode`` is ignored)."""
+        out: torch.Tensor = self(obs)
+        return out
+
+
+_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def build_student(config: StudentConfig | None = None, seed: int = 0) -> MDN | MLPStudent:
+    """A freshly initialised student of ``config.kind`` (default: the SPEC 6 MDN)."""
+    cfg = config or StudentConfig()
+    return MDN(cfg, seed) if cfg.kind == "mdn" else MLPStudent(cfg, seed)
+
+
+# ---------------------------------------------------------------------------------- training
+def _as_tensor(x: NDArray[np.floating] | torch.Tensor, name: str, cols: int) -> torch.Tensor:
+    t = torch.as_tensor(np.asarray(x, dtype=np.float32) if not torch.is_tensor(x) else x)
+    t = t.to(torch.float32)
+    if t.ndim != 2 or t.shape[1] != cols or t.shape[0] < 1:
+        raise DataError(expect(name, f"shape (N >= 1, {cols})", tuple(t.shape), "fix the data"))
+    if not bool(torch.isfinite(t).all()):
+        raise DataError(expect(name, "finite values", "NaN or inf", "drop or fix those rows"))
+    return t
+
+
+def train_student(
+    model: Student,
+    obs: NDArray[np.floating] | torch.Tensor,
+    actions: NDArray[np.floating] | torch.Tensor,
+    epochs: int = 50,
+    batch: int = 256,
+    lr: float = 1e-3,
+    seed: int = 0,
+    progress: Callable[[int, float], None] | None = None,
+    fit_normalizer: bool = True,
+) -> list[float]:
+    """Fit ``model`` to ``(obs (N, obs_dim), actions (N, 2))`` with Adam; returns the mean
+    training loss of each epoch (NLL [nats] for the MDN, standardised MSE for the MLP).
+
+    ``fit_normalizer`` first sets the standardisation buffers from this data (DAgger retrains
+    on the aggregated set each round, so the scales follow the data). Mini-batches are drawn
+    without replacement from a ``torch.Generator`` seeded by ``seed``; dropout runs under a
+    forked torch RNG seeded by ``seed``, so the same call gives the same weights and the
+    caller's RNG state is left untouched. ``progress(epoch, loss)`` is called after each epoch.
+    The model is left in eval mode (dropout off).
+    """
+    x = _as_tensor(obs, "obs", model.config.obs_dim)
+    y = _as_tensor(actions, "actions", ACTION_DIM)
+    if x.shape[0] != y.shape[0]:
+        raise DataError(
+            expect("obs/actions", "the same number of rows", (x.shape[0], y.shape[0]), "align")
+        )
+    for name, value in (("epochs", epochs), ("batch", batch)):
+        if not (isinstance(value, int) and value >= 1):
+            raise ConfigError(expect(name, "an integer >= 1", value, f"set {name} >= 1"))
+    if not (math.isfinite(lr) and lr > 0):
+        raise ConfigError(expect("lr", "a finite number > 0", lr, "use 1e-3"))
+    if fit_normalizer:
+        model.set_normalizer(x, y)
+    n = x.shape[0]
+    gen = torch.Generator().manual_seed(int(seed))
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    history: list[float] = []
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        model.train()
+        try:
+            for epoch in range(epochs):
+                perm = torch.randperm(n, generator=gen)
+                total = 0.0
+                for start in range(0, n, batch):
+                    idx = perm[start : start + batch]
+                    loss = model.loss(x[idx], y[idx])
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    opt.step()
+                    total += float(loss.detach()) * idx.shape[0]
+                history.append(total / n)
+                if not math.isfinite(history[-1]):
+                    raise DataError(
+                        expect("training loss", "finite", history[-1], "check the data scales")
+                    )
+                if progress is not None:
+                    progress(epoch, history[-1])
+        finally:
+            model.eval()
+    return history
+
+
+# ---------------------------------------------------------------------------------- checkpoints
+def save_student(model: Student, path: str | Path, info: Mapping[str, Any] | None = None) -> Path:
+    """Write ``model`` to a ``.safetensors`` file (atomically) and return the path.
+
+    Weights and normalisation buffers are the tensors; the metadata holds the format tag, the
+    :class:`StudentConfig` as JSON and optional free-form ``info`` (JSON-able: data source,
+    epochs, final loss …). No pickle: loading cannot execute code.
+    """
+    return write_checkpoint(model, model.config.to_dict(), path, CHECKPOINT_FORMAT, info)
+
+
+def read_checkpoint_meta(path: str | Path) -> dict[str, Any]:
+    """The metadata of a student checkpoint: ``format``, ``config`` (dict), ``info`` (dict)."""
+    meta, _ = _read_checkpoint(Path(path), tensors=False)
+    return meta
+
+
+def _read_checkpoint(p: Path, tensors: bool) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    fix = "re-save it with save_student (the file is truncated, corrupt or not a checkpoint)"
+    return read_checkpoint(
+        p, CHECKPOINT_FORMAT, "student checkpoint", fix, "check the path", tensors
+    )
+
+
+def load_student(path: str | Path) -> MDN | MLPStudent:
+    """Rebuild the student saved at ``path`` (right class and config), in eval mode.
+
+    Raises :class:`DataError` for a missing, corrupt or mismatched file (unknown format, bad
+    config, missing/unexpected tensors, wrong shapes, non-finite weights).
+    """
+    p = Path(path)
+    meta, arrays = _read_checkpoint(p, tensors=True)
+    try:
+        cfg = StudentConfig.from_dict(meta["config"])
+    except PioneerError as exc:
+        raise DataError(
+            expect(f"{p}: config", "a valid StudentConfig", str(exc), "re-save the checkpoint")
+        ) from exc
+    return load_checked(
+        build_student(cfg), arrays, p, f"{cfg.kind} {cfg.to_dict()}", "re-train or re-save it"
+    )

@@ -1,0 +1,119 @@
+"""Students as policies: the torch student and the registry entries (SPEC 6, 7).
+
+Registered names (importing :mod:`pioneer.learn` registers them):
+
+- ``student-mdn`` / ``student-mlp``: :class:`StudentPolicy` from a safetensors checkpoint
+  (``make_student_policy(checkpoint=...)``); the checkpoint's kind must match the name.
+- ``student-onnx``: :class:`pioneer.deploy.OnnxStudentPolicy` from an exported ONNX file
+  (``model=...``), the torch-free runtime evaluated like any other policy.
+
+A checkpoint path may contain ``{scenario}`` (one spec for every scenario, like the
+teacher's reward path).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from pioneer.control.policy import register_policy
+from pioneer.deploy.runtime import make_onnx_student_policy
+from pioneer.errors import ConfigError, expect
+from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
+
+__all__ = ["StudentPolicy", "make_student_policy"]
+
+
+class StudentPolicy:
+    """A trained student acting from the 29-D observation (PyTorch, eval mode, batch 1).
+
+    ``act`` returns the deterministic action (MDN: mean of the most probable component, or
+    the mixture mean with ``action_mode="mean"``). ``uncertainty`` holds ``(aleatoric,
+    epistemic)`` [(m/s)² + (rad/s)²] for every step of the current episode, NaN for the MLP;
+    ``reset`` clears it.
+    """
+
+    def __init__(
+        self, model: Student, name: str | None = None, action_mode: str | None = None
+    ) -> None:
+        self.model = model.eval()
+        self.name = name or f"student-{model.kind}"
+        self.action_mode = action_mode or model.config.action_mode
+        self.checkpoint: Path | None = None  # the file it was loaded from (make_student_policy)
+        self.uncertainty: list[tuple[float, float]] = []
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        """Start an episode (the student is deterministic; ``rng`` is unused)."""
+        self.uncertainty = []
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""
+        x = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(1, -1))
+        with torch.inference_mode():
+            if isinstance(self.model, MDN):
+                logits, mu, sigma = self.model(x)
+                action = select_action(logits, mu, self.action_mode)
+                ale, epi = uncertainty(logits, mu, sigma)
+                self.uncertainty.append((float(ale[0]), float(epi[0])))
+            else:
+                action = self.model.deterministic_action(x)
+                self.uncertainty.append((math.nan, math.nan))
+        return action[0].numpy().astype(np.float64)
+
+
+def make_student_policy(
+    checkpoint: str | Path | None = None,
+    scenario: str | None = None,
+    kind: str | None = None,
+    name: str | None = None,
+    action_mode: str | None = None,
+    torch_threads: int | None = 1,
+) -> StudentPolicy:
+    """Policy factory: load ``checkpoint`` (``{scenario}`` filled in) as a :class:`StudentPolicy`.
+
+    Without ``checkpoint``: the shipped DAgger student of ``scenario`` and ``kind`` (default
+    "mdn"; :func:`pioneer.data.shipped_student`). ``kind`` ("mdn" | "mlp"), when given, must
+    match the checkpoint. ``torch_threads`` sets torch's intra-op threads for this process
+    (1 by default: a batch-1 forward pass gains nothing from threads, and evaluation runs one
+    worker per core); ``None`` leaves it.
+    """
+    if checkpoint is None:
+        from pioneer.data import shipped_student
+
+        if scenario is None:
+            raise ConfigError(
+                expect("student policy", "checkpoint=PATH or a scenario", None, "pass one")
+            )
+        checkpoint = shipped_student(scenario, kind or "mdn")
+    path = str(checkpoint).format(scenario=scenario) if scenario is not None else str(checkpoint)
+    if torch_threads is not None:
+        torch.set_num_threads(int(torch_threads))
+    model = load_student(path)
+    if kind is not None and model.kind != kind:
+        raise ConfigError(
+            expect(
+                f"student checkpoint {path}",
+                f"a '{kind}' student",
+                model.kind,
+                f"use the policy 'student-{model.kind}'",
+            )
+        )
+    policy = StudentPolicy(model, name=name, action_mode=action_mode)
+    policy.checkpoint = Path(path)
+    return policy
+
+
+register_policy(
+    "student-mdn", functools.partial(make_student_policy, kind="mdn", name="student-mdn")
+)
+register_policy(
+    "student-mlp", functools.partial(make_student_policy, kind="mlp", name="student-mlp")
+)
+register_policy("student-onnx", make_onnx_student_policy)

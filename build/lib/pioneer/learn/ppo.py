@@ -1,0 +1,748 @@
+"""PPO training of the CrowdNav++ baseline in a PioneeR scenario (SPEC 5; REFERENCES CrowdNav++).
+
+``pioneer train crowdnav++ --scenario hr-rl --out DIR`` calls :func:`train_crowdnav`.
+
+Environments
+    B copies of the scenario stepped together by the pure batched core
+    (:func:`pioneer.sim.world.step`); CrowdNav++ needs no LiDAR, so a step of 16 copies costs
+    ~0.03 ms and the network dominates. Initial states are the scenario's randomised ones
+    (:func:`pioneer.sim.scenarios.sample_state`), each from its own episode seed drawn from the
+    trainer's ``np.random.Generator``. An episode ends on success, collision (humans or walls)
+    or at the time limit (30 s); every end is terminal for the returns, as in the original
+    (the time is not observed, so the timeout is not bootstrapped).
+
+Reward (:func:`crowdnav_reward`; the original's unicycle terms, REFERENCES)
+
+    r = +10                                  on success
+        −20                                  on collision (a human or a wall)
+        (d − 0.25) · 10 · Δt                 else if the clearance d < 0.25 m
+        3 (‖g − p_{t−1}‖ − ‖g − p_t‖)        otherwise (potential: decrease of goal distance)
+      + min_{i,k} −20 / 2^(k+1) · [‖p_t − p̂_i(k)‖ < r_r + r_i]   intrusion into the CV-predicted
+                                             positions k = 1..5 (Δt_pred = 0.25 s) of human i
+      − 4.5 Δθ²                               spin: Δθ = ω Δt, the heading change of the step
+      − 2 |v| if v < 0                        reversing (inert here: our v_min = 0)
+
+    d is the swept clearance over the step (``State.clearance``) and Δt our 0.1 s; the
+    intrusion term is charged on non-terminal steps. The environment's own reward
+    (``NavEnv``) is a shorter shaping; this one is computed here from the state.
+
+PPO (Schulman et al. 2017) with GAE, clip 0.2, 5 epochs, 2 minibatches, 30-step rollouts per
+environment, value-loss weight 0.5, gradient norm ≤ 0.5, Adam (ε = 1e−5) — the original's
+values, except:
+
+- discount and GAE λ per step are converted to our 0.1 s step so that they weigh time as the
+  original's 0.99 and 0.95 per 0.25 s step do: γ = 0.99^0.4 ≈ 0.996, λ = 0.95^0.4 ≈ 0.98
+  (with 0.99 per 0.1 s the success reward 20 s ahead would count 0.13 instead of 0.45);
+- learning rate 3e−4: the original's 4e−5 is for 20 M steps, our budget is a few million;
+- entropy bonus 0.01 (original: none), against an early collapse of σ; at our budget, pilots
+  with and without it settled the same way ("drive to the door and wait", docs/baselines.md);
+- the shipped weights use 64 environments (``--envs 64``; default 16 as the original): the
+  update costs about the same for 16 or 64 (10 gradient steps, dominated by per-op overhead),
+  so 4× the data per update comes almost free in wall time; they fine-tune an imitation
+  warm start (below) with lr 3e−5 and no entropy bonus (``--lr 3e-5 --entropy-coef 0``).
+
+Imitation warm start (``--bc-episodes N``, :mod:`pioneer.learn.crowdnav_bc`; a deviation from
+CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
+clones the lookahead teacher (optionally with DAgger rounds); its result is stored in ``out``
+and in the first checkpoint, so a resumed run never redoes it. ``--critic-warmup U``: the
+first U updates train only the critic head (own Adam), the cloned actor frozen, so PPO's
+first policy updates see a fitted critic. Both are off by default (pure PPO, as above).
+
+Recurrent minibatches are whole 30-step sequences of a subset of the environments; the GRU
+is re-run from the rollout's first hidden state with resets at episode starts. Advantages are
+normalised over the rollout.
+
+Outputs in ``out/`` (each written atomically)
+    ``checkpoint.safetensors``  the whole training state every ``checkpoint_every`` updates:
+                                weights, Adam moments, the environments' states, GRU states,
+                                episode accumulators, the learning curve and the RNG states
+                                (numpy ``bit_generator.state`` as JSON ints, torch generator
+                                bytes as a tensor) — a resumed run is identical to an
+                                uninterrupted one;
+    ``policy.safetensors``      the policy weights (:func:`pioneer.learn.crowdnav.load_crowdnav`);
+    ``curve.csv`` / ``curve.png``  the learning curve, ``train.json`` the run's summary;
+    ``bc_data.npz`` / ``bc_policy.safetensors``  the imitation data and the cloned policy
+                                (with ``--bc-episodes``).
+
+Resuming: running the same command on an ``out`` that holds a checkpoint continues from it
+(``--resume`` insists on one). A larger ``--steps`` extends a finished run; any other setting
+must match the checkpoint's, otherwise it is an error (use a new ``--out``). Nothing is
+deleted.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import atomic_path, write_text_atomic
+from pioneer.learn.crowdnav import (
+    CrowdNavConfig,
+    CrowdNavNet,
+    CrowdNavObs,
+    build_observation,
+    command_from_action,
+    save_crowdnav,
+)
+from pioneer.learn.crowdnav_bc import WarmStartConfig
+from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
+from pioneer.sim.world import State, World, step
+
+__all__ = [
+    "CURVE_COLUMNS",
+    "PPOConfig",
+    "RewardConfig",
+    "compute_gae",
+    "crowdnav_reward",
+    "train_crowdnav",
+]
+
+TRAIN_FORMAT = "pioneer.crowdnav-train/1"
+CURVE_COLUMNS = (
+    "update",
+    "env_steps",
+    "episodes",
+    "mean_return",
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "wall_time_s",
+)
+NONE, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
+F64 = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardConfig(Config):
+    """CrowdNav++ reward terms (unicycle values of the original)."""
+
+    success: float = 10.0  # on reaching the goal
+    collision: float = -20.0  # on a collision (humans or walls)
+    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
+    discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt  [1/(m·s)]
+    potential: float = 3.0  # × decrease of goal distance [1/m]
+    intrusion: float = -20.0  # / 2^(k+1) for predicted step k = 1..n_pred
+    spin: float = -4.5  # × Δθ² [1/rad²], Δθ the heading change of the step
+    reverse: float = -2.0  # × |v| when v < 0 [s/m]
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig(Config):
+    """PPO settings (the original's, except ``lr``; see the module docstring)."""
+
+    total_steps: int = 2_000_000  # env steps (all environments together)
+    n_envs: int = 16  # environments stepped together
+    rollout: int = 30  # steps per environment per update
+    lr: float = 3e-4  # Adam learning rate (original: 4e-5 for 20 M steps)
+    gamma: float = 0.996  # discount per 0.1 s step (the original's 0.99 per 0.25 s step)
+    gae_lambda: float = 0.98  # GAE λ per 0.1 s step (the original's 0.95 per 0.25 s step)
+    clip: float = 0.2  # PPO ratio clip
+    epochs: int = 5  # passes over each rollout
+    minibatches: int = 2  # per epoch (split over environments)
+    value_coef: float = 0.5  # value-loss weight
+    entropy_coef: float = 0.01  # entropy bonus (original: 0; see the module docstring)
+    max_grad_norm: float = 0.5  # gradient clipping (global L2 norm)
+    adam_eps: float = 1e-5  # Adam ε
+    seed: int = 0  # seeds the weights, the action noise, the minibatches and the episodes
+    checkpoint_every: int = 50  # [updates] between checkpoints
+    window: int = 100  # finished episodes in the learning curve's running statistics
+
+    def __post_init__(self) -> None:
+        for name in (
+            "total_steps",
+            "n_envs",
+            "rollout",
+            "epochs",
+            "minibatches",
+            "checkpoint_every",
+            "window",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise ConfigError(
+                    expect(f"PPOConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
+                )
+        if self.minibatches > self.n_envs:
+            raise ConfigError(
+                expect(
+                    "PPOConfig.minibatches",
+                    f"<= n_envs ({self.n_envs})",
+                    self.minibatches,
+                    "use more environments or fewer minibatches",
+                )
+            )
+        for name in ("lr", "clip", "max_grad_norm", "adam_eps"):
+            check_positive("PPOConfig", name, getattr(self, name))
+        for name in ("value_coef", "entropy_coef"):
+            check_nonnegative("PPOConfig", name, getattr(self, name))
+        for name in ("gamma", "gae_lambda"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+                raise ConfigError(expect(f"PPOConfig.{name}", "in [0, 1]", value, "use 0.99/0.95"))
+        if not (isinstance(self.seed, int) and self.seed >= 0):
+            raise ConfigError(expect("PPOConfig.seed", "an integer >= 0", self.seed, "use 0"))
+
+    @property
+    def steps_per_update(self) -> int:
+        """Env steps per update: n_envs × rollout."""
+        return self.n_envs * self.rollout
+
+    @property
+    def updates(self) -> int:
+        """Updates needed for ``total_steps`` (rounded up)."""
+        return -(-self.total_steps // self.steps_per_update)
+
+
+# ------------------------------------------------------------------------------ reward, GAE
+def crowdnav_reward(
+    world: World,
+    prev: State,
+    new: State,
+    config: RewardConfig,
+    n_pred: int = 5,
+    pred_dt: float = 0.25,
+) -> tuple[F64, NDArray[np.int8]]:
+    """Per-copy reward ``(B,)`` and event code ``(B,)`` (0 none, 1 success, 2 collision,
+    3 timeout) of the step ``prev → new`` (formula in the module docstring)."""
+    rc = config
+    sim = world.sim
+    dt = sim.dt
+    collided = new.collided & ~prev.collided
+    reached = new.reached & ~prev.reached & ~collided
+    timeout = ~(collided | reached) & (new.t >= sim.time_limit - 1e-9)
+    event = np.where(
+        collided, COLLISION, np.where(reached, SUCCESS, np.where(timeout, TIMEOUT, NONE))
+    ).astype(np.int8)
+    d0 = np.linalg.norm(prev.goal - prev.robot[:, :2], axis=1)
+    d1 = np.linalg.norm(new.goal - new.robot[:, :2], axis=1)
+    c = new.clearance
+    base = np.where(
+        c < rc.discomfort_distance,
+        (c - rc.discomfort_distance) * rc.discomfort_scale * dt,
+        rc.potential * (d0 - d1),
+    )
+    r = np.where(collided, rc.collision, np.where(reached, rc.success, base))
+    # Intrusion into the constant-velocity predictions of the humans, k = 1..n_pred.
+    if new.n_humans:
+        ks = np.arange(1, n_pred + 1) * pred_dt
+        pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
+        dist = np.linalg.norm(pred - new.robot[:, None, None, :2], axis=-1)  # (B, N, K)
+        hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
+        pen = rc.intrusion / 2.0 ** (np.arange(1, n_pred + 1) + 1)  # (K,)
+        intr = np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2))
+        r = r + np.where(collided | reached, 0.0, intr)
+    v, w = new.command[:, 0], new.command[:, 1]
+    r = r + rc.spin * (w * dt) ** 2 + np.where(v < 0.0, rc.reverse * np.abs(v), 0.0)
+    return r, event
+
+
+def compute_gae(
+    rewards: F64, values: F64, dones: F64, last_value: F64, gamma: float, lam: float
+) -> tuple[F64, F64]:
+    """Generalised advantage estimates and returns, both ``(T, B)``.
+
+    ``rewards``, ``values`` (V(s_t)), ``dones`` (1: the episode ended with step t) are
+    ``(T, B)``; ``last_value`` is V of the state after the last step ``(B,)``.
+    δ_t = r_t + γ V_{t+1} (1 − d_t) − V_t,  A_t = δ_t + γ λ (1 − d_t) A_{t+1};  R_t = A_t + V_t.
+    """
+    t_len = rewards.shape[0]
+    adv = np.zeros_like(rewards, dtype=np.float64)
+    last = np.zeros(rewards.shape[1:], dtype=np.float64)
+    for t in range(t_len - 1, -1, -1):
+        nxt = last_value if t == t_len - 1 else values[t + 1]
+        keep = 1.0 - dones[t]
+        delta = rewards[t] + gamma * nxt * keep - values[t]
+        last = delta + gamma * lam * keep * last
+        adv[t] = last
+    return adv, adv + values
+
+
+# ------------------------------------------------------------------------------ state helpers
+def _state_fields() -> list[str]:
+    return [f.name for f in dataclasses.fields(State)]
+
+
+def _stack_states(states: list[State]) -> State:
+    return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in _state_fields()})
+
+
+def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, Mapping):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _put(batch: State, b: int, single: State) -> None:
+    for k in _state_fields():
+        getattr(batch, k)[b] = getattr(single, k)[0]
+
+
+# ------------------------------------------------------------------------------ the trainer
+class _Trainer:
+    """Everything that changes during training (saved whole in the checkpoint)."""
+
+    def __init__(
+        self,
+        scenario: ScenarioConfig,
+        ppo: PPOConfig,
+        net: CrowdNavConfig,
+        reward: RewardConfig,
+        warm: WarmStartConfig | None = None,
+    ) -> None:
+        self.scenario, self.ppo, self.net_cfg, self.reward_cfg = scenario, ppo, net, reward
+        self.warm = warm or WarmStartConfig()
+        self.world = scenario.world()
+        self.model = CrowdNavNet(net, seed=ppo.seed)
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=ppo.lr, eps=ppo.adam_eps)
+        # The critic warm-up trains the critic head alone, with its own optimiser.
+        self.critic_params = [*self.model.critic.parameters(), *self.model.value_head.parameters()]
+        self.critic_opt = torch.optim.Adam(
+            self.critic_params, lr=self.warm.critic_lr, eps=ppo.adam_eps
+        )
+        self.rng = np.random.default_rng(np.random.SeedSequence([ppo.seed, 0x0C20D]))
+        self.gen = torch.Generator().manual_seed(ppo.seed + 1)
+        b = ppo.n_envs
+        self.state = _stack_states([self._sample() for _ in range(b)])
+        self.h = self.model.initial_state(b)
+        self.start = np.ones(b, dtype=np.bool_)  # the hidden state is reset before this step
+        self.ep_return = np.zeros(b)
+        self.update = 0
+        self.env_steps = 0
+        self.episodes = 0
+        self.wall = 0.0
+        self.win_return: list[float] = []
+        self.win_event: list[int] = []
+        self.curve: list[list[float]] = []
+
+    def _sample(self) -> State:
+        seed = int(self.rng.integers(2**63))
+        return sample_state(self.scenario, np.random.default_rng(seed))
+
+    # -------------------------------------------------------------------- rollout
+    def _policy_step(self, obs: CrowdNavObs) -> tuple[torch.Tensor, ...]:
+        from pioneer.learn.crowdnav import obs_tensors
+
+        keep = torch.from_numpy(~self.start).to(torch.float32).unsqueeze(-1)
+        x, _, _ = self.model.encode(*obs_tensors(obs))
+        h = self.model.gru(x, self.h * keep)
+        mean, value = self.model.heads(h)
+        return h, mean, value
+
+    def rollout(self) -> dict[str, Any]:
+        """Collect ``rollout`` steps of every environment (no gradients)."""
+        ppo, t_len, b = self.ppo, self.ppo.rollout, self.ppo.n_envs
+        buf: dict[str, list[Any]] = {
+            k: [] for k in ("robot", "temporal", "spatial", "mask", "start", "action", "logp")
+        }
+        values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
+        h0 = self.h.clone()
+        std = torch.exp(self.model.log_std.detach())
+        sim = self.world.sim
+        with torch.no_grad():
+            for t in range(t_len):
+                obs = build_observation(self.state, self.world, self.net_cfg)
+                h, mean, value = self._policy_step(obs)
+                noise = torch.randn(mean.shape, generator=self.gen)
+                action = mean + std * noise
+                logp = torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
+                for k, x in zip(("robot", "temporal", "spatial", "mask"), obs, strict=True):
+                    buf[k].append(x)
+                buf["start"].append(self.start.copy())
+                buf["action"].append(action)
+                buf["logp"].append(logp)
+                values[t] = value.numpy()
+                cmd = command_from_action(
+                    action.numpy(), self.state.command[:, 0], sim.robot, sim.dt, self.net_cfg
+                )
+                new = step(self.world, self.state, cmd)
+                r, event = crowdnav_reward(
+                    self.world,
+                    self.state,
+                    new,
+                    self.reward_cfg,
+                    self.net_cfg.n_pred,
+                    self.net_cfg.pred_dt,
+                )
+                rewards[t] = r
+                done = event != NONE
+                dones[t] = done
+                self.ep_return += r
+                for i in np.flatnonzero(done):
+                    self._finish(float(self.ep_return[i]), int(event[i]))
+                    self.ep_return[i] = 0.0
+                    _put(new, int(i), self._sample())
+                self.state, self.h, self.start = new, h, done
+            obs = build_observation(self.state, self.world, self.net_cfg)
+            _, _, last_value = self._policy_step(obs)
+        self.env_steps += t_len * b
+        adv, ret = compute_gae(
+            rewards, values, dones, last_value.numpy().astype(np.float64), ppo.gamma, ppo.gae_lambda
+        )
+        stacked = {k: np.stack(v) for k, v in buf.items() if k not in ("action", "logp")}
+        return {
+            **{k: torch.from_numpy(v) for k, v in stacked.items()},
+            "action": torch.stack(buf["action"]),
+            "logp": torch.stack(buf["logp"]),
+            "adv": torch.from_numpy(adv).to(torch.float32),
+            "ret": torch.from_numpy(ret).to(torch.float32),
+            "h0": h0,
+        }
+
+    def _finish(self, ret: float, event: int) -> None:
+        self.episodes += 1
+        self.win_return = [*self.win_return, ret][-self.ppo.window :]
+        self.win_event = [*self.win_event, event][-self.ppo.window :]
+
+    # -------------------------------------------------------------------- update
+    def learn(self, batch: dict[str, Any]) -> dict[str, float]:
+        """PPO epochs over the rollout (or, during the critic warm-up, value regression of the
+        critic head alone); returns mean losses."""
+        ppo, model = self.ppo, self.model
+        warmup = self.update < self.warm.critic_warmup
+        adv = batch["adv"]
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        stats = {"policy_loss": 0.0, "value_loss": 0.0, "entropy": 0.0, "n": 0.0}
+        model.train()
+        for _ in range(ppo.epochs):
+            perm = torch.randperm(ppo.n_envs, generator=self.gen)
+            for idx in torch.tensor_split(perm, ppo.minibatches):
+                x, _, _ = model.encode(
+                    batch["robot"][:, idx],
+                    batch["temporal"][:, idx],
+                    batch["spatial"][:, idx],
+                    batch["mask"][:, idx],
+                )
+                keep = (~batch["start"][:, idx]).to(torch.float32).unsqueeze(-1)
+                h = batch["h0"][idx]
+                hs = []
+                for t in range(x.shape[0]):
+                    h = model.gru(x[t], h * keep[t])
+                    hs.append(h)
+                if warmup:
+                    value = model.value_head(model.critic(torch.stack(hs).detach())).squeeze(-1)
+                    vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
+                    self.critic_opt.zero_grad(set_to_none=True)
+                    (ppo.value_coef * vl).backward()
+                    torch.nn.utils.clip_grad_norm_(self.critic_params, ppo.max_grad_norm)
+                    self.critic_opt.step()
+                    stats["value_loss"] += float(vl.detach())
+                    stats["n"] += 1
+                    continue
+                mean, value = model.heads(torch.stack(hs))
+                dist = torch.distributions.Normal(mean, torch.exp(model.log_std))
+                logp = dist.log_prob(batch["action"][:, idx]).sum(-1)
+                ratio = torch.exp(logp - batch["logp"][:, idx])
+                a = adv[:, idx]
+                pg = -torch.min(ratio * a, ratio.clamp(1 - ppo.clip, 1 + ppo.clip) * a).mean()
+                vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
+                ent = dist.entropy().sum(-1).mean()
+                loss = pg + ppo.value_coef * vl - ppo.entropy_coef * ent
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), ppo.max_grad_norm)
+                self.opt.step()
+                stats["policy_loss"] += float(pg.detach())
+                stats["value_loss"] += float(vl.detach())
+                stats["entropy"] += float(ent.detach())
+                stats["n"] += 1
+        model.eval()
+        n = stats.pop("n")
+        return {k: v / n for k, v in stats.items()}
+
+    def record(self) -> list[float]:
+        """Append this update's learning-curve row."""
+        ev = np.asarray(self.win_event)
+
+        def rate(code: int) -> float:
+            return float(np.mean(ev == code)) if ev.size else math.nan
+
+        row = [
+            float(self.update),
+            float(self.env_steps),
+            float(self.episodes),
+            float(np.mean(self.win_return)) if self.win_return else math.nan,
+            rate(SUCCESS),
+            rate(COLLISION),
+            rate(TIMEOUT),
+            self.wall,
+        ]
+        self.curve.append(row)
+        return row
+
+    # -------------------------------------------------------------------- checkpoint
+    def settings(self) -> dict[str, Any]:
+        """What must match between a checkpoint and a resuming command."""
+        ppo = self.ppo.to_dict()
+        for k in ("total_steps", "checkpoint_every"):
+            ppo.pop(k)
+        out = {
+            "scenario": self.scenario.name,
+            "ppo": ppo,
+            "net": self.net_cfg.to_dict(),
+            "reward": self.reward_cfg.to_dict(),
+        }
+        if self.warm.active:  # absent for pure PPO: older checkpoints stay resumable
+            out["warm_start"] = self.warm.to_dict()
+        return out
+
+    def save(self, path: Path) -> None:
+        """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
+        from safetensors.torch import save
+
+        tensors: dict[str, torch.Tensor] = {
+            f"model/{k}": v.detach().clone().contiguous()
+            for k, v in self.model.state_dict().items()
+        }
+        osd = self.opt.state_dict()
+        for i, st in osd["state"].items():
+            for k, v in st.items():
+                tensors[f"optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        cosd = self.critic_opt.state_dict()
+        for i, st in cosd["state"].items():
+            for k, v in st.items():
+                tensors[f"critic_optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        for k in _state_fields():
+            tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
+        tensors["train/h"] = self.h.clone().contiguous()
+        tensors["train/start"] = torch.from_numpy(self.start.copy())
+        tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
+        tensors["curve"] = torch.tensor(self.curve, dtype=torch.float64).reshape(
+            -1, len(CURVE_COLUMNS)
+        )
+        tensors["window/return"] = torch.tensor(self.win_return, dtype=torch.float64)
+        tensors["window/event"] = torch.tensor(self.win_event, dtype=torch.int64)
+        tensors["rng/torch"] = self.gen.get_state()
+        meta = {
+            "format": TRAIN_FORMAT,
+            "settings": json.dumps(self.settings()),
+            "param_groups": json.dumps(osd["param_groups"]),
+            "critic_param_groups": json.dumps(cosd["param_groups"]),
+            "counters": json.dumps(
+                {
+                    "update": self.update,
+                    "env_steps": self.env_steps,
+                    "episodes": self.episodes,
+                    "wall_time_s": self.wall,
+                }
+            ),
+            "rng_numpy": json.dumps(self.rng.bit_generator.state),
+            "torch": torch.__version__,
+        }
+        with atomic_path(path) as tmp:  # bytes, not save_file: that makes the file mode 0600
+            tmp.write_bytes(save(tensors, metadata=meta))
+
+    def load(self, path: Path) -> None:
+        """Restore the state written by :meth:`save` (settings must match this trainer's)."""
+        from safetensors import SafetensorError, safe_open
+
+        fix = "point --out at a new folder (the checkpoint is corrupt or of another kind)"
+        try:
+            with safe_open(str(path), framework="pt") as fh:
+                meta = dict(fh.metadata() or {})
+                t = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118
+        except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+            raise DataError(expect(f"checkpoint {path}", "a readable file", str(exc), fix)) from exc
+        if meta.get("format") != TRAIN_FORMAT:
+            raise DataError(expect(f"{path}: format", TRAIN_FORMAT, meta.get("format"), fix))
+        stored = _flat(json.loads(meta["settings"]))
+        mine = _flat(self.settings())
+        diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
+        if diff:
+            raise ConfigError(
+                expect(
+                    f"{path}: settings",
+                    "the same settings as this command (only --steps may change)",
+                    {k: stored.get(k) for k in diff},
+                    "repeat the original command (see train.json) or use a new --out",
+                )
+            )
+        self.model.load_state_dict(
+            {k[len("model/") :]: v for k, v in t.items() if k.startswith("model/")}, strict=True
+        )
+        osd: dict[str, Any] = {"state": {}, "param_groups": json.loads(meta["param_groups"])}
+        for k, v in t.items():
+            if k.startswith("optim/"):
+                _, i, name = k.split("/")
+                osd["state"].setdefault(int(i), {})[name] = v
+        self.opt.load_state_dict(osd)
+        if "critic_param_groups" in meta:
+            cosd: dict[str, Any] = {
+                "state": {},
+                "param_groups": json.loads(meta["critic_param_groups"]),
+            }
+            for k, v in t.items():
+                if k.startswith("critic_optim/"):
+                    _, i, name = k.split("/")
+                    cosd["state"].setdefault(int(i), {})[name] = v
+            self.critic_opt.load_state_dict(cosd)
+        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _state_fields()})
+        self.h = t["train/h"].clone()
+        self.start = t["train/start"].numpy().copy()
+        self.ep_return = t["train/ep_return"].numpy().copy()
+        self.curve = t["curve"].tolist()
+        self.win_return = t["window/return"].tolist()
+        self.win_event = [int(x) for x in t["window/event"].tolist()]
+        self.gen.set_state(t["rng/torch"])
+        self.rng.bit_generator.state = json.loads(meta["rng_numpy"])
+        c = json.loads(meta["counters"])
+        self.update, self.env_steps = int(c["update"]), int(c["env_steps"])
+        self.episodes, self.wall = int(c["episodes"]), float(c["wall_time_s"])
+
+
+# ------------------------------------------------------------------------------ outputs
+def _curve_csv(rows: list[list[float]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(CURVE_COLUMNS)
+    for r in rows:
+        w.writerow([int(r[0]), int(r[1]), int(r[2]), *(f"{x:.6g}" for x in r[3:])])
+    return buf.getvalue()
+
+
+def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool) -> None:
+    tr.save(out / "checkpoint.safetensors")
+    save_crowdnav(tr.model, out / "policy.safetensors", info)
+    write_text_atomic(out / "curve.csv", _curve_csv(tr.curve))
+    if final:
+        from pioneer.viz.plots import plot_learning_curve
+
+        arr = np.asarray(tr.curve, dtype=np.float64).reshape(-1, len(CURVE_COLUMNS))
+        plot_learning_curve(
+            {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
+            out / "curve.png",
+            title=f"CrowdNav++ · {tr.scenario.name} · "
+            + ("imitation + PPO" if tr.warm.bc_episodes else "PPO"),
+        )
+        write_text_atomic(out / "train.json", json.dumps(dict(info), indent=2) + "\n")
+
+
+def train_crowdnav(
+    scenario: str,
+    out_dir: str | Path,
+    ppo: PPOConfig | None = None,
+    net: CrowdNavConfig | None = None,
+    reward: RewardConfig | None = None,
+    warm: WarmStartConfig | None = None,
+    resume: bool | None = None,
+    progress: bool = True,
+    command: str = "",
+    torch_threads: int | None = 1,
+    on_update: Callable[[dict[str, float]], None] | None = None,
+) -> dict[str, Any]:
+    """Train (or resume) CrowdNav++ on ``scenario``; returns the summary written to train.json.
+
+    ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
+    ``True`` requires it, ``False`` refuses an ``out`` that holds one (nothing is deleted).
+    """
+    ppo = ppo or PPOConfig()
+    sc = get_scenario(scenario)
+    out = Path(out_dir)
+    ckpt = out / "checkpoint.safetensors"
+    if resume is True and not ckpt.is_file():
+        raise ConfigError(
+            expect("--resume", f"a checkpoint at {ckpt}", "none", "drop --resume to start afresh")
+        )
+    if resume is False and ckpt.is_file():
+        raise ConfigError(
+            expect("--out", "a folder without a checkpoint", str(out), "resume or use a new --out")
+        )
+    if torch_threads is not None:
+        torch.set_num_threads(int(torch_threads))
+    # One spatial-edge slot per human of the scenario unless configured otherwise.
+    net = net or CrowdNavConfig(max_humans=max(1, len(sc.humans)))
+    warm = warm or WarmStartConfig()
+    tr = _Trainer(sc, ppo, net, reward or RewardConfig(), warm)
+    resumed_from = None
+    bc_info: dict[str, Any] | None = None
+    if ckpt.is_file():
+        tr.load(ckpt)
+        resumed_from = tr.update
+    out.mkdir(parents=True, exist_ok=True)
+    if warm.bc_episodes:
+        # Imitation first (reused from out/ when done); the checkpoint then holds its result.
+        from pioneer.learn.crowdnav_bc import warm_start
+
+        if resumed_from is None:
+            bc_model, bc_info = warm_start(sc, net, warm, ppo.seed, out, progress=progress)
+            tr.model.load_state_dict(bc_model.state_dict(), strict=True)
+            tr.save(ckpt)
+        elif (out / "bc_policy.safetensors").is_file():
+            from pioneer.learn.crowdnav import read_crowdnav_meta
+
+            bc_info = read_crowdnav_meta(out / "bc_policy.safetensors")["info"]
+
+    def info() -> dict[str, Any]:
+        last = tr.curve[-1] if tr.curve else [math.nan] * len(CURVE_COLUMNS)
+        return {
+            "scenario": sc.name,
+            "command": command,
+            "updates": tr.update,
+            "env_steps": tr.env_steps,
+            "episodes": tr.episodes,
+            "wall_time_s": round(tr.wall, 1),
+            "resumed_from_update": resumed_from,
+            "final": dict(zip(CURVE_COLUMNS[3:7], last[3:7], strict=True)),
+            "ppo": ppo.to_dict(),
+            "reward": tr.reward_cfg.to_dict(),
+            **({"warm_start": warm.to_dict()} if warm.active else {}),
+            **(
+                {"imitation": {k: bc_info[k] for k in ("data", "bc_loss", "log_std")}}
+                if bc_info
+                else {}
+            ),
+        }
+
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=ppo.updates * ppo.steps_per_update,
+        initial=tr.env_steps,
+        unit="step",
+        desc=f"crowdnav++ {sc.name}",
+        disable=not progress,
+        mininterval=2.0,
+    )
+    t_start, s_start = time.perf_counter(), tr.env_steps
+    try:
+        while tr.update < ppo.updates:
+            t0 = time.perf_counter()
+            batch = tr.rollout()
+            stats = tr.learn(batch)
+            tr.update += 1
+            tr.wall += time.perf_counter() - t0
+            row = tr.record()
+            rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
+            bar.update(ppo.steps_per_update)
+            bar.set_postfix(
+                {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
+                refresh=False,
+            )
+            if on_update is not None:
+                on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
+            if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
+                _write_outputs(tr, out, info(), final=False)
+    finally:
+        bar.close()
+    summary = info()
+    summary["steps_per_s_this_run"] = (tr.env_steps - s_start) / max(
+        time.perf_counter() - t_start, 1e-9
+    )
+    _write_outputs(tr, out, summary, final=True)
+    return summary

@@ -1,0 +1,151 @@
+"""An uncertainty shield around a student (beyond the paper, which only suggests it, §V-B.2).
+
+At every step the student proposes ``(v, ω)`` and reports its aleatoric and epistemic
+uncertainty. When the chosen signal exceeds the threshold the shield intervenes:
+
+- ``mode="handover"``: the fallback decides this step — the privileged teacher in simulation
+  (labelling from the command actually applied, like DAgger), or a rule-based controller
+  (``fallback="goal" | "dwa" | "sfm"``, what a robot without privileged state would use);
+- ``mode="slow"``: the student's command with the speed scaled by ``slow_factor``.
+
+Threshold: a number, or by default the ``quantile`` (0.95) of the signal over the student's
+own DAgger training frames, stored in the checkpoint (``uncertainty_quantiles``) — the shield
+then intervenes on the ≈5 % least familiar situations. Default signal: the aleatoric part,
+which separates risky from safe frames better than the epistemic part in our elevator runs
+(docs/student.md). Registered as ``student-shield``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.control.policy import Policy, build_policy, register_policy
+from pioneer.control.teacher import LookaheadTeacher
+from pioneer.errors import ConfigError, expect
+from pioneer.learn.models import read_checkpoint_meta
+from pioneer.learn.policy import StudentPolicy, make_student_policy
+
+__all__ = ["ShieldPolicy", "make_shield_policy"]
+
+SIGNALS = ("epistemic", "aleatoric", "total")
+MODES = ("handover", "slow")
+
+
+class ShieldPolicy:
+    """Student + fallback; ``shielded`` records (0/1) whether each step was overridden."""
+
+    def __init__(
+        self,
+        student: StudentPolicy,
+        fallback: Policy | None,
+        threshold: float,
+        signal: str = "aleatoric",
+        mode: str = "handover",
+        slow_factor: float = 0.3,
+        name: str = "student-shield",
+    ) -> None:
+        if signal not in SIGNALS:
+            raise ConfigError(expect("shield signal", f"one of {SIGNALS}", signal, "aleatoric"))
+        if mode not in MODES:
+            raise ConfigError(expect("shield mode", f"one of {MODES}", mode, "use handover"))
+        if mode == "handover" and fallback is None:
+            raise ConfigError(
+                expect("shield fallback", "a policy for handover", None, "pass fallback=teacher")
+            )
+        if not (threshold >= 0.0 and np.isfinite(threshold)):
+            raise ConfigError(expect("shield threshold", "a finite number >= 0", threshold, "0.1"))
+        if not 0.0 <= slow_factor <= 1.0:
+            raise ConfigError(expect("slow_factor", "in [0, 1]", slow_factor, "use 0.3"))
+        self.student = student
+        self.fallback = fallback
+        self.threshold = float(threshold)
+        self.signal = signal
+        self.mode = mode
+        self.slow_factor = float(slow_factor)
+        self.name = name
+        self.shielded: list[float] = []
+
+    @property
+    def uncertainty(self) -> list[tuple[float, float]]:
+        """The student's ``(aleatoric, epistemic)`` of every step of this episode."""
+        return self.student.uncertainty
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        """Start an episode (student and fallback)."""
+        self.student.reset(info, rng)
+        if self.fallback is not None:
+            self.fallback.reset(info, rng)
+        self.shielded = []
+
+    def _value(self) -> float:
+        ale, epi = self.student.uncertainty[-1]
+        return {"epistemic": epi, "aleatoric": ale, "total": ale + epi}[self.signal]
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        """The student's command, or the fallback's / a slowed one when it is unsure."""
+        u = self.student.act(obs, info)
+        intervene = self._value() > self.threshold
+        self.shielded.append(float(intervene))
+        if not intervene:
+            return u
+        if self.mode == "slow":
+            return np.array([u[0] * self.slow_factor, u[1]])
+        assert self.fallback is not None
+        if isinstance(self.fallback, LookaheadTeacher):  # smooth from the applied command
+            state = info["state"]
+            return self.fallback.decide(info["world"], state, prev=state.command[0]).command
+        return np.asarray(self.fallback.act(obs, info), dtype=np.float64)
+
+
+def default_threshold(checkpoint: str | Path, signal: str, quantile: float) -> float:
+    """The ``quantile`` of ``signal`` over the checkpoint's DAgger training frames."""
+    info = read_checkpoint_meta(checkpoint)["info"]
+    qs = info.get("uncertainty_quantiles", {}) if isinstance(info, dict) else {}
+    names = ["aleatoric", "epistemic"] if signal == "total" else [signal]
+    try:
+        return float(sum(qs[n][str(quantile)] for n in names))
+    except KeyError as exc:
+        raise ConfigError(
+            expect(
+                f"{checkpoint}: uncertainty_quantiles[{quantile}]",
+                "stored by `pioneer distill` (quantiles 0.5, 0.9, 0.95, 0.99)",
+                "missing",
+                "pass threshold=VALUE",
+            )
+        ) from exc
+
+
+def make_shield_policy(
+    checkpoint: str | Path | None = None,
+    scenario: str | None = None,
+    fallback: str = "teacher",
+    threshold: float | None = None,
+    quantile: float = 0.95,
+    signal: str = "aleatoric",
+    mode: str = "handover",
+    slow_factor: float = 0.3,
+    reward: str | None = None,
+    name: str = "student-shield",
+) -> ShieldPolicy:
+    """Policy factory: an MDN student (default: the shipped one of ``scenario``) shielded by
+    ``fallback`` (a registered policy name; the teacher gets ``reward`` if given)."""
+    student = make_student_policy(checkpoint, scenario=scenario, kind="mdn")
+    assert student.checkpoint is not None
+    thr = (
+        threshold
+        if threshold is not None
+        else default_threshold(student.checkpoint, signal, quantile)
+    )
+    fb = None
+    if mode == "handover":
+        kwargs: dict[str, Any] = {"reward": reward} if (fallback == "teacher" and reward) else {}
+        fb = build_policy(fallback, scenario, **kwargs)
+    return ShieldPolicy(student, fb, thr, signal, mode, slow_factor, name=name)
+
+
+register_policy("student-shield", make_shield_policy)

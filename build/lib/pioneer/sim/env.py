@@ -1,0 +1,180 @@
+"""Gymnasium environment over the pure world core (SPEC 1.3, 1.4).
+
+Observation ``Box(29,)`` float32 (SPEC 1.4); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
+10 Hz. ``terminated`` on success or collision, ``truncated`` at the time limit (30 s).
+
+The environment's scalar reward is a CrowdNav++-style shaping (REFERENCES.md) for RL
+baselines; PioneeR's own learned reward lives in ``pioneer.reward``. Its per-term breakdown is
+in ``info["rewards"]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.config import Config
+from pioneer.errors import ConfigError, expect
+from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
+from pioneer.sim.world import State, World, observe, step
+
+__all__ = ["NavEnv", "RewardConfig", "register_envs"]
+
+ENV_IDS = {
+    "pioneer/ElevatorHRRL-v0": "hr-rl",
+    "pioneer/ElevatorHLRR-v0": "hl-rr",
+    "pioneer/StaticStudy-v0": "static",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardConfig(Config):
+    """Shaping reward of the environment (CrowdNav++ unicycle values)."""
+
+    success: float = 10.0  # on reaching the goal
+    collision: float = -20.0  # on a collision
+    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
+    discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt when d < d_disc
+    progress: float = 3.0  # × decrease of goal distance [1/m]
+    spin: float = -4.5  # × ω² · Δt [s²/rad²]
+
+
+class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """A PioneeR scenario as a Gymnasium environment.
+
+    ``info`` carries ``event`` (``"success"``, ``"collision"``, ``"timeout"`` or ``None``),
+    ``robot_pose`` (x, y, θ), ``goal``, ``min_clearance`` (swept clearance to the nearest human
+    over the last step [m]), ``episode_min_clearance``, ``time`` [s], ``path_length`` [m],
+    ``rewards`` (per term), and ``state``/``world`` for privileged controllers.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012
+
+    def __init__(
+        self,
+        scenario: str | ScenarioConfig = "hr-rl",
+        render_mode: str | None = None,
+        reward: RewardConfig | None = None,
+    ) -> None:
+        self.scenario = get_scenario(scenario) if isinstance(scenario, str) else scenario
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(
+                expect("render_mode", f"one of {self.metadata['render_modes']}", render_mode, "")
+            )
+        self.render_mode = render_mode
+        self.reward_cfg = reward or RewardConfig()
+        self.world: World = self.scenario.world()
+        sim = self.scenario.sim
+        lid = sim.lidar
+        n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1
+        self.observation_space = gym.spaces.Box(
+            low=np.array([0.0] * n_dist + [-math.pi] * n_ang, dtype=np.float32),
+            high=np.array([lid.max_range] * n_dist + [math.pi] * n_ang, dtype=np.float32),
+            dtype=np.float32,
+        )
+        self.action_space = gym.spaces.Box(
+            low=sim.robot.command_low.astype(np.float32),
+            high=sim.robot.command_high.astype(np.float32),
+            dtype=np.float32,
+        )
+        self._state: State | None = None
+        self._ep_min_clear = math.inf
+
+    @property
+    def state(self) -> State:
+        """The current world state (B = 1)."""
+        if self._state is None:
+            raise ConfigError(expect("NavEnv.state", "a reset environment", None, "call reset()"))
+        return self._state
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        """Sample an initial state from ``self.np_random`` (or take ``options["state"]``)."""
+        super().reset(seed=seed)
+        opts = options or {}
+        start = opts.get("state")
+        if start is not None:
+            if not isinstance(start, State) or start.batch_size != 1:
+                raise ConfigError(
+                    expect("options['state']", "a State with B = 1", start, "take(0)")
+                )
+            self._state = start.copy()
+        else:
+            self._state = sample_state(self.scenario, self.np_random)
+        self._ep_min_clear = float(self._state.clearance[0])
+        obs = observe(self.world, self._state, self.np_random)[0]
+        return obs, self._info(None, {})
+
+    def step(
+        self, action: NDArray[np.floating] | list[float]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        """Apply ``(v, ω)`` for one control period."""
+        prev = self.state
+        new = step(self.world, prev, np.asarray(action, dtype=np.float64))
+        self._state = new
+        self._ep_min_clear = min(self._ep_min_clear, float(new.clearance[0]))
+        collided = bool(new.collided[0])
+        reached = bool(new.reached[0])
+        timeout = bool(
+            not (collided or reached) and new.t[0] >= self.scenario.sim.time_limit - 1e-9
+        )
+        event = (
+            "collision" if collided else "success" if reached else "timeout" if timeout else None
+        )
+        rewards = self._rewards(prev, new, event)
+        obs = observe(self.world, new, self.np_random)[0]
+        info = self._info(event, rewards)
+        return obs, float(sum(rewards.values())), collided or reached, timeout, info
+
+    def _rewards(self, prev: State, new: State, event: str | None) -> dict[str, float]:
+        rc = self.reward_cfg
+        d0 = float(np.linalg.norm(prev.goal[0] - prev.robot[0, :2]))
+        d1 = float(np.linalg.norm(new.goal[0] - new.robot[0, :2]))
+        dt = self.scenario.sim.dt
+        c = float(new.clearance[0])
+        return {
+            "success": rc.success if event == "success" else 0.0,
+            "collision": rc.collision if event == "collision" else 0.0,
+            "discomfort": (c - rc.discomfort_distance) * rc.discomfort_scale * dt
+            if 0.0 <= c < rc.discomfort_distance
+            else 0.0,
+            "progress": rc.progress * (d0 - d1),
+            "spin": rc.spin * float(new.command[0, 1]) ** 2 * dt,
+        }
+
+    def _info(self, event: str | None, rewards: dict[str, float]) -> dict[str, Any]:
+        s = self.state
+        return {
+            "event": event,
+            "robot_pose": s.robot[0].copy(),
+            "goal": s.goal[0].copy(),
+            "min_clearance": float(s.clearance[0]),
+            "episode_min_clearance": self._ep_min_clear,
+            "wall_clearance": float(s.wall_clearance[0]),
+            "time": float(s.t[0]),
+            "path_length": float(s.path_length[0]),
+            "rewards": rewards,
+            "state": s,
+            "world": self.world,
+        }
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """An RGB frame drawn by :mod:`pioneer.viz` (only ``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        from pioneer.viz.frames import render_frame
+
+        return render_frame(self.world, self.state)
+
+
+def register_envs() -> None:
+    """Register the PioneeR environment ids with Gymnasium (idempotent)."""
+    for env_id, name in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point="pioneer.sim.env:NavEnv", kwargs={"scenario": name})
