@@ -147,9 +147,11 @@ class LookaheadTeacher:
             # Only candidates that can be chosen: about half collide in the lobby, and the
             # density is most of a decision's arithmetic. (Infeasible ones keep 0; they score −∞.)
             feats = rollout_features(self.features, ro).reshape(c, n_l, -1)[feasible]
-            r_den[feasible] = self.density(feats.reshape(n_feasible * n_l, -1)).reshape(
-                n_feasible, n_l
-            ).mean(axis=1)
+            r_den[feasible] = (
+                self.density(feats.reshape(n_feasible * n_l, -1))
+                .reshape(n_feasible, n_l)
+                .mean(axis=1)
+            )
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
         total = total + extra
