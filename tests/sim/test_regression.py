@@ -1,0 +1,97 @@
+"""Regression guard for the simulator's numbers: seeded trajectories against stored ones.
+
+The behaviour tests check physics; this one pins *the values*, so a refactor or an
+optimisation of the step kernel, the social-force model or the LiDAR that changes any
+trajectory fails here instead of silently changing every dataset, teacher label and result
+made with it. Continuous values are compared to 1e-9 (a different CPU's libm may differ in
+the last bits; over 25 steps that stays far below this), discrete ones exactly.
+
+After an *intended* change of the dynamics, regenerate the reference and say why in the
+commit::
+
+    .venv/bin/python tests/sim/test_regression.py --regenerate
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pioneer.io import atomic_path
+from pioneer.sim import get_scenario, observe, sample_state, step
+
+REFERENCE = Path(__file__).with_name("data") / "regression.npz"
+SCENARIOS = ("hr-rl", "hl-rr", "static")
+SEEDS = (0, 1, 2)
+N_COPIES, N_STEPS = 4, 25
+CONTINUOUS = ("robot", "h_pos", "h_vel", "clearance", "wall_clearance", "path_length", "obs")
+DISCRETE = ("collided", "reached", "h_status", "h_wp_index")
+
+
+def trajectory(name: str, seed: int) -> dict[str, np.ndarray]:
+    """Every step's state of 4 copies under seeded random commands (some out of range)."""
+    scenario = get_scenario(name)
+    world = scenario.world()
+    rng = np.random.default_rng(seed)
+    state = sample_state(scenario, rng).repeat(N_COPIES)
+    lo, hi = scenario.sim.robot.command_low, scenario.sim.robot.command_high
+    out: dict[str, list[np.ndarray]] = {k: [] for k in (*CONTINUOUS, *DISCRETE)}
+    for k in range(N_STEPS):
+        u = rng.uniform(lo - 0.2, hi + 0.2, size=(N_COPIES, 2))
+        state = step(world, state, u, dt=0.3 if k % 2 else None)
+        for key in out:
+            out[key].append(observe(world, state) if key == "obs" else getattr(state, key))
+    return {key: np.stack(v) for key, v in out.items()}
+
+
+def _all() -> dict[str, np.ndarray]:
+    return {
+        f"{name}/{seed}/{key}": value
+        for name in SCENARIOS
+        for seed in SEEDS
+        for key, value in trajectory(name, seed).items()
+    }
+
+
+@pytest.fixture(scope="module")
+def reference() -> dict[str, np.ndarray]:
+    with np.load(REFERENCE, allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_seeded_trajectories_match_the_stored_reference(name, seed, reference):
+    now = trajectory(name, seed)
+    for key in CONTINUOUS:
+        np.testing.assert_allclose(
+            now[key], reference[f"{name}/{seed}/{key}"], rtol=0, atol=1e-9, err_msg=key
+        )
+    for key in DISCRETE:
+        np.testing.assert_array_equal(now[key], reference[f"{name}/{seed}/{key}"], err_msg=key)
+
+
+def test_the_reference_covers_humans_walls_and_collisions(reference):
+    """The stored runs exercise what they guard: moving humans, walls and collisions."""
+    walked = [
+        np.abs(np.diff(reference[f"{n}/{s}/h_pos"], axis=0)).max()
+        for n in SCENARIOS[:2]
+        for s in SEEDS
+    ]
+    assert min(walked) > 0.0
+    assert any(reference[f"{n}/{s}/collided"].any() for n in SCENARIOS for s in SEEDS)
+    assert any(
+        np.isfinite(reference[f"{n}/{s}/wall_clearance"]).all() for n in SCENARIOS for s in SEEDS
+    )
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--regenerate"]:
+        sys.exit("usage: python tests/sim/test_regression.py --regenerate")
+    REFERENCE.parent.mkdir(exist_ok=True)
+    with atomic_path(REFERENCE) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **_all())
+    print(f"wrote {REFERENCE}")
