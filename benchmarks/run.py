@@ -1283,6 +1283,45 @@ def source_fingerprint() -> dict[str, Any]:
     return out
 
 
+def host_probe(repeats: int = 15) -> dict[str, Any]:
+    """A fixed reference workload, timed before and after the benchmarks: how fast and how
+    busy the host was. ``busy`` = median / best over all three parts; ≈ 1 on an idle machine.
+    Compare a run's probe with another's before comparing their medians."""
+    rng = np.random.default_rng(0)
+    x = rng.random(200_000)
+    a = rng.random((256, 256), dtype=np.float32)
+
+    def py_loop() -> None:
+        total = 0
+        for i in range(100_000):
+            total += i
+
+    parts = {
+        "sort_200k_ms": lambda: np.sort(x),
+        "sgemm_256_ms": lambda: a @ a,
+        "python_loop_ms": py_loop,
+    }
+    out: dict[str, Any] = {}
+    ratios = []
+    for name, fn in parts.items():
+        fn()
+        secs = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            fn()
+            secs.append(time.perf_counter() - t)
+        best, med = min(secs) * 1e3, float(np.median(secs)) * 1e3
+        out[name] = {"best": round(best, 4), "median": round(med, 4)}
+        ratios.append(med / best)
+    out["busy"] = round(float(np.mean(ratios)), 2)
+    return out
+
+
+def _probe_line(tag: str, p: dict[str, Any]) -> str:
+    parts = ", ".join(f"{k} {v['best']:.3g}" for k, v in p.items() if isinstance(v, dict))
+    return f"host probe {tag}: best {parts}; median/best {p['busy']}×"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repeats (smoke run)")
@@ -1319,9 +1358,11 @@ def main(argv: list[str] | None = None) -> int:
             _PREVIOUS.update(json.loads(args.output.read_text()))
 
     source_before = source_fingerprint()
+    probe_before = host_probe()
     t0 = time.perf_counter()
     results = run_benchmarks(names, plan)
     elapsed = time.perf_counter() - t0
+    probe_after = host_probe()
     source = source_fingerprint()
     sim_changed = source["sim"]["sha256"] != source_before["sim"]["sha256"]
     if sim_changed:
@@ -1330,6 +1371,8 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print_table(results)
     print(f"\n{len(results)} benchmark(s) in {elapsed:.1f} s ({'quick' if args.quick else 'full'})")
+    print(_probe_line("before", probe_before))
+    print(_probe_line("after ", probe_after))
 
     # Keep earlier results of benchmarks not run this time (each carries its own timestamp).
     merged: dict[str, Any] = {}
@@ -1343,6 +1386,7 @@ def main(argv: list[str] | None = None) -> int:
         "ran": names,
         "elapsed_s": round(elapsed, 2),
         "machine": machine_info(),
+        "host_probe": {"before": probe_before, "after": probe_after},
         "source": source,
         "sim_source_changed_during_run": sim_changed,
         "numba_cache": "fresh" if os.environ.get(FRESH_CACHE_ENV) else "reused",
