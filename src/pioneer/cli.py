@@ -304,6 +304,7 @@ def _cmd_distill(args: argparse.Namespace) -> int:
         student=args.student,
         action_mode=args.action_mode,
         nll_beta=args.nll_beta,
+        label_prev=args.label_prev,
         teacher_episodes=args.teacher_episodes,
         rounds=args.rounds,
         episodes_per_round=args.episodes_per_round,
@@ -443,6 +444,12 @@ def _parser() -> argparse.ArgumentParser:
         "--action-mode", choices=["mode", "mean"], default="mode", help="MDN's executed action"
     )
     d.add_argument("--nll-beta", type=float, default=0.0, help="MDN's β-NLL exponent in [0, 1]")
+    d.add_argument(
+        "--label-prev",
+        choices=["applied", "teacher"],
+        default="applied",
+        help="u_{t-1} in the teacher's smoothed label on student-driven steps",
+    )
     d.add_argument("--out", required=True, help="output folder (resumes if it exists)")
     d.add_argument("--teacher-episodes", type=int, default=50, help="round 0 episodes")
     d.add_argument("--rounds", type=int, default=10, help="student-driven rounds")

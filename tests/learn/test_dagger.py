@@ -483,6 +483,26 @@ def test_cli_rerun_with_other_settings_is_one_line_and_exit_2(run_mdn, reward_fi
 
 
 # ------------------------------------------------------------------------------ MLP student
+def test_teacher_label_prev_smooths_with_the_teachers_own_previous_label(tmp_path, reward_file):
+    """``label_prev="teacher"``: on student-driven steps the label is the teacher's decision
+    smoothed from its own previous label (as if it had been driving), not from the command
+    the student applied."""
+    cfg = TINY_CFG.replace(label_prev="teacher", teacher_episodes=1, rounds=1, episodes_per_round=1)
+    run_dagger(cfg, tmp_path / "tp", workers=1, reward=reward_file, progress=False)
+    ep = _load(tmp_path / "tp/rounds/round-01/ep-000.npz")
+    teacher = make_teacher(TINY, reward=str(reward_file))
+    env = NavEnv(TINY)
+    _, info = env.reset(seed=int(ep["env_seed"]))
+    teacher.reset(info, np.random.default_rng(0))
+    for t in range(len(ep["obs"])):
+        state = info["state"]
+        label = teacher.decide(info["world"], state).command  # from its own previous label
+        np.testing.assert_allclose(ep["action"][t], label, rtol=0, atol=1e-6)
+        _, _, _, _, info = env.step(ep["applied"][t].astype(np.float64))
+    # the student did not drive the labels, so smoothing from the applied command would differ
+    assert not np.allclose(ep["applied"][:-1], ep["action"][:-1], atol=1e-3)
+
+
 def test_mlp_student_run(tmp_path, reward_file):
     cfg = TINY_CFG.replace(student="mlp", teacher_episodes=1, rounds=1, episodes_per_round=1)
     res = run_dagger(cfg, tmp_path / "mlp", workers=1, reward=reward_file, progress=False)
@@ -563,6 +583,7 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file
         ({"lr": 0.0}, "lr"),
         ({"lr": math.nan}, "lr"),
         ({"action_mode": "median"}, "action_mode"),
+        ({"label_prev": "student"}, "label_prev"),
     ],
 )
 def test_bad_config_values_are_refused(changes, needle):

@@ -69,6 +69,9 @@ FINAL_FILE = "student.safetensors"
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
 
 
+LABEL_PREV = ("applied", "teacher")
+
+
 @dataclasses.dataclass(frozen=True)
 class DaggerConfig(Config):
     """A DAgger run (defaults = SPEC 6: 50 teacher episodes + 10 rounds × 50)."""
@@ -77,6 +80,11 @@ class DaggerConfig(Config):
     student: str = "mdn"  # "mdn" | "mlp"
     action_mode: str = "mode"  # MDN's deterministic action in rollouts and checkpoint
     nll_beta: float = 0.0  # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
+    # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
+    # command the robot actually ran) or "teacher" (the teacher's own previous label along the
+    # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
+    # labels). Equal on teacher-driven steps.
+    label_prev: str = "applied"
     teacher_episodes: int = 50  # round 0, driven by the teacher
     rounds: int = 10  # student-driven rounds after round 0
     episodes_per_round: int = 50
@@ -103,6 +111,10 @@ class DaggerConfig(Config):
                 raise ConfigError(expect(name, "an integer >= 0", v, f"set {name} >= 0"))
         if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
             raise ConfigError(expect("nll_beta", "a number in [0, 1]", self.nll_beta, "use 1.0"))
+        if self.label_prev not in LABEL_PREV:
+            raise ConfigError(
+                expect("label_prev", f"one of {LABEL_PREV}", self.label_prev, "use 'applied'")
+            )
         if not (math.isfinite(self.lr) and self.lr > 0):
             raise ConfigError(expect("lr", "a finite number > 0", self.lr, "use 1e-3"))
 
@@ -154,7 +166,11 @@ def _student(checkpoint: str) -> Any:
 
 
 def collect_episode(
-    scenario: str, reward: str, checkpoint: str | None, env_seed: int
+    scenario: str,
+    reward: str,
+    checkpoint: str | None,
+    env_seed: int,
+    label_prev: str = "applied",
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
@@ -174,7 +190,8 @@ def collect_episode(
     event = None
     while event is None:
         state = info["state"]
-        label = teacher.decide(info["world"], state, prev=state.command[0]).command
+        prev = state.command[0] if label_prev == "applied" else None  # None: its own last label
+        label = teacher.decide(info["world"], state, prev=prev).command
         u = label if student is None else student.act(obs, info)
         rows_obs.append(np.asarray(obs, dtype=np.float32))
         rows_lab.append(label)
@@ -201,9 +218,9 @@ def collect_episode(
     }
 
 
-def _collect_task(args: tuple[str, str, str | None, int, str]) -> str:
-    scenario, reward, checkpoint, env_seed, path = args
-    ep = collect_episode(scenario, reward, checkpoint, env_seed)
+def _collect_task(args: tuple[str, str, str | None, int, str, str]) -> str:
+    scenario, reward, checkpoint, env_seed, path, label_prev = args
+    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **ep)
     return path
@@ -226,7 +243,7 @@ def _episode_path(out: Path, rnd: int, i: int) -> Path:
 
 
 def _run_parallel(
-    tasks: list[tuple[str, str, str | None, int, str]],
+    tasks: list[tuple[str, str, str | None, int, str, str]],
     pool: ProcessPoolExecutor | None,
     workers: int,
 ) -> Iterator[str]:
@@ -365,6 +382,7 @@ def run_dagger(
                     prev_ckpt,
                     dagger_seed(cfg.scenario, cfg.seed, rnd, i),
                     str(_episode_path(out, rnd, i)),
+                    cfg.label_prev,
                 )
                 for i in range(cfg.episodes_in(rnd))
                 if not _episode_path(out, rnd, i).exists()
