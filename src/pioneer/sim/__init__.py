@@ -25,7 +25,16 @@ from pioneer.sim.scenarios import (
     scenario_names,
     static_study_scenario,
 )
-from pioneer.sim.world import SimConfig, State, World, goal_bearing, observe, scan, step
+from pioneer.sim.world import (
+    SimConfig,
+    State,
+    World,
+    goal_bearing,
+    observe,
+    observe_states,
+    scan,
+    step,
+)
 
 __all__ = [
     "ARRIVED",
@@ -52,6 +61,7 @@ __all__ = [
     "observation_from_scan",
     "observation_names",
     "observe",
+    "observe_states",
     "register_scenario",
     "resample_scan",
     "sample_state",
