@@ -1296,21 +1296,15 @@ def host_probe(repeats: int = 15) -> dict[str, Any]:
         for i in range(100_000):
             total += i
 
-    parts = {
-        "sort_200k_ms": lambda: np.sort(x),
-        "sgemm_256_ms": lambda: a @ a,
-        "python_loop_ms": py_loop,
+    cases = {
+        "sort_200k_ms": Case(lambda _: np.sort(x)),
+        "sgemm_256_ms": Case(lambda _: a @ a),
+        "python_loop_ms": Case(lambda _: py_loop()),
     }
     out: dict[str, Any] = {}
     ratios = []
-    for name, fn in parts.items():
-        fn()
-        secs = []
-        for _ in range(repeats):
-            t = time.perf_counter()
-            fn()
-            secs.append(time.perf_counter() - t)
-        best, med = min(secs) * 1e3, float(np.median(secs)) * 1e3
+    for name, secs in time_cases(cases, repeats).items():
+        best, med = float(secs.min()) * 1e3, float(np.median(secs)) * 1e3
         out[name] = {"best": round(best, 4), "median": round(med, 4)}
         ratios.append(med / best)
     out["busy"] = round(float(np.mean(ratios)), 2)

@@ -425,8 +425,7 @@ class _OsqpWorkspace:
         nv = 2 + n + n * s
         rob = world.sim.robot
         self.rows, self.cols, self.order, self.perm = _csc_layout(n, s, lin.hw0.shape[0], n_con)
-        box_size = self.order.shape[0] - n_con
-        self.n_box = box_size
+        self.n_box = self.order.shape[0] - n_con  # v, ω, η box rows
         self.lo = np.concatenate([-off, rob.command_low, np.zeros(n * s)])
         self.hi = np.concatenate([np.full(n_con, np.inf), rob.command_high, np.full(n * s, np.inf)])
         w2 = 2.0 * np.array([cfg.weight_v, cfg.weight_omega])

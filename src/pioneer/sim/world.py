@@ -86,7 +86,7 @@ class World:
         object.__setattr__(self, "walls", walls)
         object.__setattr__(self, "bounds", bounds)
         object.__setattr__(self, "_sfm_params", self.sim.social_force.as_array())
-        object.__setattr__(self, "_wall_soa", wall_soa(walls))
+        object.__setattr__(self, "_wall_table", wall_soa(walls))
 
     @property
     def sfm_params(self) -> F64:
@@ -96,7 +96,7 @@ class World:
     @property
     def wall_table(self) -> F64:
         """The walls as rows x1, y1, ex, ey, ‖e‖² for the social-force kernel (see wall_soa)."""
-        return self._wall_soa  # type: ignore[attr-defined]
+        return self._wall_table  # type: ignore[attr-defined]
 
 
 WALL_LANES = 4  # the wall table is padded to a multiple of this (one AVX2 vector of float64)
@@ -259,7 +259,7 @@ def _step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> 
         world.wall_table,
         world.bounds,
         world.sfm_params,
-        world.sim.robot.radius,
+        robot.radius,
         world.sim.goal_tolerance,
         dt,
         n_sub,
