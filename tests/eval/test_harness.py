@@ -396,6 +396,13 @@ def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path,
         ),
         ('sfm:name="x",label=3', "sfm", {"name": "x"}, "3"),
         ("dwa:v=[0.1]", "dwa", {"v": (0.1,)}, ""),  # a list becomes a (hashable) tuple
+        ("dwa:v=[0.1, 0.2],w=1", "dwa", {"v": (0.1, 0.2), "w": 1}, ""),  # commas in a list
+        (  # commas (and an escaped quote) inside a quoted text
+            'student-mlp:checkpoint="runs/a,b/\\"c\\".safetensors",label="x,y"',
+            "student-mlp",
+            {"checkpoint": 'runs/a,b/"c".safetensors'},
+            "x,y",
+        ),
     ],
 )
 def test_policy_spec_parse(text, name, kwargs, label):
@@ -406,7 +413,19 @@ def test_policy_spec_parse(text, name, kwargs, label):
 
 
 @pytest.mark.parametrize(
-    "text", ["", ":a=1", "goal:", "goal:a", "goal:=1", "goal:a=1,a=2", "goal:1a=2"]
+    "text",
+    [
+        "",
+        ":a=1",
+        "goal:",
+        "goal:a",
+        "goal:=1",
+        "goal:a=1,a=2",
+        "goal:1a=2",
+        "goal:a=1,b",
+        "goal:a=[1,2",
+        'goal:a="x,b=2',
+    ],
 )
 def test_policy_spec_parse_refuses_bad_syntax(text):
     with pytest.raises(ConfigError) as err:

@@ -55,8 +55,10 @@ class PolicySpec:
     def parse(cls, text: str) -> PolicySpec:
         """``NAME`` or ``NAME:key=value,key=value`` (the CLI's ``--policy`` syntax).
 
-        Values are read as JSON when they parse (``0.5``, ``true``, ``"x"``), else taken as
-        text (paths); ``label=`` names the row. E.g.
+        Values are read as JSON when they parse (``0.5``, ``true``, ``"x"``, ``[1, 2]``),
+        else taken as text (paths); ``label=`` names the row. Parameters are separated by the
+        commas outside brackets and double quotes, so a list or a quoted text may hold commas
+        (``checkpoint="runs/a,b/s.safetensors"``). E.g.
         ``student-mdn:checkpoint=runs/d/student.safetensors,action_mode=mean,label=mine``.
         """
         name, sep, rest = text.partition(":")
@@ -64,7 +66,7 @@ class PolicySpec:
         if not name.strip() or (sep and not rest.strip()):
             raise ConfigError(expect("policy", "NAME[:key=value,…]", text, fix))
         kwargs: dict[str, Any] = {}
-        for item in rest.split(",") if rest else []:
+        for item in _split_parameters(rest, text, fix) if rest else []:
             key, eq, raw = item.partition("=")
             key = key.strip()
             if not eq or not key.isidentifier() or key in kwargs:
@@ -82,6 +84,32 @@ class PolicySpec:
             kwargs[key] = tuple(value) if isinstance(value, list) else value  # hashable
         label = kwargs.pop("label", "")
         return cls(name.strip(), tuple(sorted(kwargs.items())), str(label))
+
+
+def _split_parameters(rest: str, text: str, fix: str) -> list[str]:
+    """``rest`` split at the commas outside ``[…]``, ``{…}`` and ``"…"`` (JSON values)."""
+    items: list[str] = []
+    depth, quoted, escaped, start = 0, False, False, 0
+    for i, ch in enumerate(rest):
+        if escaped:  # the character after a backslash inside quotes
+            escaped = False
+        elif quoted:
+            escaped, quoted = ch == "\\", ch != '"'
+        elif ch == '"':
+            quoted = True
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            items.append(rest[start:i])
+            start = i + 1
+    if quoted or depth != 0:
+        raise ConfigError(
+            expect("policy", "balanced brackets and quotes in NAME:key=value,…", text, fix)
+        )
+    items.append(rest[start:])
+    return items
 
 
 @dataclasses.dataclass(frozen=True)
