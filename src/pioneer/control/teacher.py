@@ -21,7 +21,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -133,6 +133,38 @@ class LookaheadTeacher:
         cfg = self.config
         if prev is not None:
             self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
+        sc = self._score(world, state)
+        if sc.n_feasible == 0:
+            self._prev = np.zeros(2)
+            return Decision(self._prev.copy(), np.zeros(2), -1, 0, {}, {})
+        i = int(np.argmax(sc.scored))
+        best = self.candidates[i]
+        cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
+        self._prev = cmd
+        return Decision(
+            command=cmd.copy(),
+            best=best.copy(),
+            index=i,
+            n_feasible=sc.n_feasible,
+            terms={
+                **{k: float(v[i]) for k, v in sc.terms.items()},
+                "extra": float(sc.extra[i]),
+                "total": float(sc.scored[i]),
+            },
+            raw_terms={
+                "density": float(sc.r_den[i]),
+                "goal": float(sc.r_goal[i]),
+                "obstacle": float(sc.r_obs[i]),
+            },
+        )
+
+    def scores(self, world: World, state: State) -> F64:
+        """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible; the
+        decision is its argmax (ties: the lowest candidate index)."""
+        return self._score(world, state).scored
+
+    def _score(self, world: World, state: State) -> _Scores:
+        cfg = self.config
         w = cfg.weights
         ro = rollout(world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model)
         c, n_l = ro.robot.shape[:2]
@@ -154,31 +186,20 @@ class LookaheadTeacher:
             )
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
-        total = total + extra
-        if n_feasible == 0:
-            self._prev = np.zeros(2)
-            return Decision(self._prev.copy(), np.zeros(2), -1, 0, {}, {})
-        scored = np.where(feasible, total, -np.inf)
-        i = int(np.argmax(scored))
-        best = self.candidates[i]
-        cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
-        self._prev = cmd
-        return Decision(
-            command=cmd.copy(),
-            best=best.copy(),
-            index=i,
-            n_feasible=n_feasible,
-            terms={
-                **{k: float(v[i]) for k, v in terms.items()},
-                "extra": float(extra[i]),
-                "total": float(total[i]),
-            },
-            raw_terms={
-                "density": float(r_den[i]),
-                "goal": float(r_goal[i]),
-                "obstacle": float(r_obs[i]),
-            },
-        )
+        scored = np.where(feasible, total + extra, -np.inf)
+        return _Scores(scored, n_feasible, terms, extra, r_den, r_goal, r_obs)
+
+
+class _Scores(NamedTuple):
+    """Per-candidate quantities of one scoring pass (all ``(C,)``)."""
+
+    scored: F64  # total + extra, −∞ where infeasible
+    n_feasible: int
+    terms: dict[str, F64]  # weighted terms from ``combine``
+    extra: F64
+    r_den: F64
+    r_goal: F64
+    r_obs: F64
 
 
 @functools.lru_cache(maxsize=8)

@@ -1,0 +1,113 @@
+"""Regression guard for the teacher's decisions: seeded states against stored choices.
+
+The teacher's choices are the labels of every DAgger dataset and the behaviour of every
+teacher row, so a change to the rollout, the rule terms, the density reward's fit or its
+float32 evaluation that changes a choice should fail here, not surface later as different
+students. The states come from seeded random drives (no trajectory feedback, so one changed
+choice cannot cascade). For every state the reference keeps the chosen candidate, its score
+and the margin to the runner-up.
+
+A choice must be the stored one unless the stored margin is a near-tie (below ``TIE``
+relative): the float32 density evaluation's last bits depend on the BLAS kernels of the CPU
+(and on the number of feasible rows), so a different machine may legitimately break an exact
+tie the other way. Scores are compared to ``SCORE_RTOL``.
+
+After an *intended* change of the teacher or its reward, regenerate the reference and say why
+in the commit::
+
+    .venv/bin/python tests/control/test_teacher_regression.py --regenerate
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pioneer.control.teacher import LookaheadTeacher, default_reward
+from pioneer.io import atomic_path
+from pioneer.sim import get_scenario, sample_state, step
+
+REFERENCE = Path(__file__).with_name("data") / "teacher_regression.npz"
+SCENARIOS = ("hr-rl", "hl-rr")
+SEEDS = (0, 1, 2)
+N_DECISIONS = 12  # per seed, one every STRIDE steps (0.1 s each) of a random drive
+STRIDE = 5
+TIE = 1e-5  # relative score margin below which either of the two best may win
+SCORE_RTOL = 1e-5
+
+
+def decisions(name: str, seed: int) -> dict[str, np.ndarray]:
+    """The teacher's choice in each state of a seeded random drive."""
+    scenario = get_scenario(name)
+    world = scenario.world()
+    teacher = LookaheadTeacher(default_reward(name))
+    rng = np.random.default_rng(seed)
+    state = sample_state(scenario, rng)
+    out: dict[str, list[float]] = {"index": [], "score": [], "margin": [], "n_feasible": []}
+    for _ in range(N_DECISIONS):
+        scored = teacher.scores(world, state)
+        finite = np.sort(scored[np.isfinite(scored)])
+        i = int(np.argmax(scored)) if finite.size else -1
+        out["index"].append(i)
+        out["score"].append(finite[-1] if finite.size else np.nan)
+        out["margin"].append(
+            (finite[-1] - finite[-2]) / max(abs(finite[-1]), 1e-12) if finite.size > 1 else np.inf
+        )
+        out["n_feasible"].append(finite.size)
+        for _ in range(STRIDE):
+            u = np.array([[rng.uniform(0.0, 0.5), rng.uniform(-0.6, 0.6)]])
+            state = step(world, state, u)
+    return {key: np.array(v) for key, v in out.items()}
+
+
+def _all() -> dict[str, np.ndarray]:
+    return {
+        f"{name}/{seed}/{key}": value
+        for name in SCENARIOS
+        for seed in SEEDS
+        for key, value in decisions(name, seed).items()
+    }
+
+
+@pytest.fixture(scope="module")
+def reference() -> dict[str, np.ndarray]:
+    if not REFERENCE.exists():
+        pytest.fail(f"{REFERENCE} is missing; run {Path(__file__).name} --regenerate")
+    with np.load(REFERENCE) as ref:
+        return {k: ref[k] for k in ref.files}
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_teacher_decisions_match_reference(reference, name, seed):
+    now = decisions(name, seed)
+    ref = {key: reference[f"{name}/{seed}/{key}"] for key in now}
+    np.testing.assert_array_equal(now["n_feasible"], ref["n_feasible"])
+    np.testing.assert_allclose(now["score"], ref["score"], rtol=SCORE_RTOL, atol=1e-9)
+    changed = np.flatnonzero(now["index"] != ref["index"])
+    not_ties = changed[ref["margin"][changed] >= TIE]
+    assert not_ties.size == 0, (
+        f"{name} seed {seed}: the teacher chose differently in decisions {not_ties.tolist()} "
+        f"(candidates {now['index'][not_ties].tolist()}, reference "
+        f"{ref['index'][not_ties].tolist()}); if intended, regenerate the reference"
+    )
+
+
+def test_reference_is_informative(reference):
+    """The drives visit varied decisions (not one repeated candidate) with clear margins."""
+    index = np.concatenate([reference[f"{n}/{s}/index"] for n in SCENARIOS for s in SEEDS])
+    margin = np.concatenate([reference[f"{n}/{s}/margin"] for n in SCENARIOS for s in SEEDS])
+    assert np.unique(index).size >= 8
+    assert np.mean(margin >= TIE) > 0.9
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--regenerate"]:
+        sys.exit("usage: test_teacher_regression.py --regenerate")
+    REFERENCE.parent.mkdir(exist_ok=True)
+    with atomic_path(REFERENCE) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **_all())
+    print(f"wrote {REFERENCE}")
