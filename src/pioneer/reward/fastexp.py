@@ -6,7 +6,9 @@ computes e^x as 2^n · e^r with n = round(x / ln 2) and r = x − n ln 2 (Cody�
 ln 2 into a short high part and a low part, so n ln 2 is exact enough), e^r by a degree-7
 Taylor polynomial on |r| ≤ ln 2 / 2 (Estrin's scheme, a short dependency chain), and 2^n by
 adding n to the float's exponent bits. Every step is branch-free, so the loop becomes SIMD
-on any vector width.
+on any vector width; multiply–add pairs may be fused (``fastmath={"contract"}``: one FMA
+instead of a rounded product and a sum — the only fast-math flag, so no reassociation; 30 %
+faster on AVX2 with the same error bound, docs/performance.md).
 
 Accuracy: relative error ≤ 3e−7 against float64 ``exp`` for x ∈ [−86, 88] (tested), below
 the float32 evaluation error the density reward already accepts (docs/reward.md, ~1e−6). Inputs
@@ -24,7 +26,7 @@ from numpy.typing import NDArray
 __all__ = ["exp_shifted_inplace"]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
 def exp_shifted_inplace(
     k: NDArray[np.float32],  # (M, N), C-contiguous, overwritten
     a: NDArray[np.float32],  # (M,) row offsets
