@@ -893,7 +893,8 @@ for _ in range({n}):
     ranges = rng.uniform(0.4, 6.0, size=360)
     rt.step(ranges, -math.pi, 2 * math.pi / 360, 10.0, np.array([2.0, 0.5]))
 print(json.dumps({{"rss_peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
-                  "torch": "torch" in sys.modules and sys.modules["torch"] is not None}}))
+                  "torch": "torch" in sys.modules and sys.modules["torch"] is not None,
+                  "numba": "numba" in sys.modules}}))
 """
 
 
@@ -905,7 +906,7 @@ def bench_deploy_memory(plan: Plan) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="pioneer-bench-deploy-") as tmp:
         path = export_onnx(build_student(seed=SEED + 60), Path(tmp) / "student.onnx")
         code = DEPLOY_CHILD.format(onnx=str(path), seed=SEED + 61, n=1000)
-        for k in range(plan.memory_repeats + 1):  # run 0 only fills the numba cache
+        for k in range(plan.memory_repeats + 1):  # run 0 only warms the file cache
             proc = subprocess.run(
                 [sys.executable, "-S", "-c", MEMORY_LAUNCHER, code],
                 cwd=REPO,
@@ -921,7 +922,12 @@ def bench_deploy_memory(plan: Plan) -> dict[str, Any]:
                 peaks.append(rec["rss_peak_kb"] / 1024)
     return {
         "metrics": {"peak_rss_mb": metric(peaks, "MB", ("<", 200.0))},
-        "info": {"scans": 1000, "torch_imported": False, "runtime": "onnxruntime, 1 thread"},
+        "info": {
+            "scans": 1000,
+            "torch_imported": rec["torch"],  # as reported by the (last) child process
+            "numba_imported": rec["numba"],
+            "runtime": "onnxruntime, 1 thread",
+        },
     }
 
 

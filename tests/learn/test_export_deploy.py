@@ -218,18 +218,21 @@ def test_runtime_refuses_bad_files_and_inputs(students, tmp_path):
 BLOCKED = """
 import importlib.abc, json, sys
 
-class BlockTorch(importlib.abc.MetaPathFinder):
+BLOCKED = ("torch", "numba", "llvmlite", "pioneer.sim")
+
+class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError(f"torch is blocked in this test ({name})")
+        if any(name == b or name.startswith(b + ".") for b in BLOCKED):
+            raise ImportError(f"{name} is blocked in this test")
         return None
 
-sys.meta_path.insert(0, BlockTorch())
-try:
-    import torch  # noqa: F401
-    raise SystemExit("the torch blocker does not work")
-except ImportError:
-    pass
+sys.meta_path.insert(0, Block())
+for name in BLOCKED:
+    try:
+        __import__(name)
+        raise SystemExit(f"the {name} blocker does not work")
+    except ImportError:
+        pass
 
 import math
 import numpy as np
@@ -238,12 +241,15 @@ from pioneer.deploy import StudentRuntime
 rt = StudentRuntime(sys.argv[1])
 ranges = [1.0 + 0.5 * math.cos(3 * i * 2 * math.pi / 360) for i in range(360)]
 d = rt.step(ranges, -math.pi, 2 * math.pi / 360, 5.0, (2.0, 1.0))
-heavy = sorted(m for m in ("torch", "pioneer.learn", "pioneer.control") if m in sys.modules)
+heavy = sorted(
+    m for m in ("torch", "numba", "pioneer.sim", "pioneer.learn", "pioneer.control")
+    if m in sys.modules
+)
 print(json.dumps({"decision": list(d), "heavy": heavy}))
 """
 
 
-def test_deploy_runs_with_torch_blocked(students):
+def test_deploy_runs_with_torch_numba_and_simulator_blocked(students):
     model, path = students["mdn"]
     proc = subprocess.run(
         [sys.executable, "-c", BLOCKED, str(path)],
@@ -275,4 +281,6 @@ def test_deploy_sources_never_import_torch():
             elif isinstance(node, ast.ImportFrom):
                 names = [node.module or ""]
             for n in names:
-                assert not n.startswith(("torch", "pioneer.learn")), f"{src.name} imports {n}"
+                assert not n.startswith(("torch", "numba", "pioneer.learn", "pioneer.sim")), (
+                    f"{src.name} imports {n}"
+                )

@@ -33,7 +33,7 @@ from tqdm import tqdm
 from pioneer.deploy.runtime import StudentRuntime
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
 from pioneer.io import atomic_path
-from pioneer.sim.lidar import LidarConfig
+from pioneer.laser import LidarConfig
 
 __all__ = [
     "CSV_COLUMNS",

@@ -1,7 +1,8 @@
 """The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (SPEC 6).
 
-Imports numpy, onnxruntime and :mod:`pioneer.sim.lidar` only — never torch — so it runs on a
-robot computer with ``pip install pioneer-nav[deploy]``. The ONNX file comes from
+Imports numpy, onnxruntime and :mod:`pioneer.laser` only — never torch, numba or the
+simulator — so it runs on a robot computer with ``pip install pioneer-nav[deploy]``, starts in
+well under a second and compiles nothing at its first scan. The ONNX file comes from
 :func:`pioneer.learn.export.export_onnx`; its graph already computes the deterministic action
 and the aleatoric/epistemic uncertainty, so a decision is one ``session.run`` on a batch of 1.
 
@@ -30,9 +31,9 @@ Wiring a ROS 2 ``sensor_msgs/LaserScan`` topic (sketch; rclpy and tf2 are not de
 The scan must be in a frame whose origin is the robot centre, x forward, counter-clockwise
 positive (``base_link``); if the laser is mounted off-centre or upside down, transform or
 reverse the ranges first (a negative ``angle_increment`` is handled). ``+inf`` ranges mean "no
-return" (REP 117) and NaNs are ignored, as in :func:`pioneer.sim.lidar.resample_scan`. The
-runtime does not clip the command: pass it through the base's velocity limits
-(:func:`pioneer.sim.robot.clip_command` with the robot's :class:`RobotConfig`).
+return" (REP 117) and NaNs are ignored, as in :func:`pioneer.laser.resample_scan`. The
+runtime does not clip the command: pass it through the base's velocity limits (in
+simulation, :func:`pioneer.sim.robot.clip_command` with the robot's ``RobotConfig`` does this).
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
-from pioneer.sim.lidar import LidarConfig, observation_from_scan
+from pioneer.laser import LidarConfig, observation_from_scan
 
 __all__ = [
     "ONNX_FORMAT",

@@ -20,16 +20,11 @@ from numpy.typing import NDArray
 
 from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
+from pioneer.registration import ENV_IDS, register_envs
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
-__all__ = ["NavEnv", "RewardConfig", "register_envs"]
-
-ENV_IDS = {
-    "pioneer/ElevatorHRRL-v0": "hr-rl",
-    "pioneer/ElevatorHLRR-v0": "hl-rr",
-    "pioneer/StaticStudy-v0": "static",
-}
+__all__ = ["ENV_IDS", "NavEnv", "RewardConfig", "register_envs"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,10 +166,3 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         from pioneer.viz.frames import render_frame
 
         return render_frame(self.world, self.state)
-
-
-def register_envs() -> None:
-    """Register the PioneeR environment ids with Gymnasium (idempotent)."""
-    for env_id, name in ENV_IDS.items():
-        if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="pioneer.sim.env:NavEnv", kwargs={"scenario": name})
