@@ -576,10 +576,11 @@ def _single_threaded_blas() -> None:
 
 def _register_scenario_files(files: Sequence[str]) -> None:
     """Add ``--scenarios`` files to ``PIONEER_SCENARIOS``, which spawned worker processes
-    inherit, and load them here once (a bad file fails before any work)."""
-    from pioneer.sim.scenarios import SCENARIOS_ENV, load_env_scenarios
-
+    inherit, and load them here once (a bad file fails before any work). Without files the
+    simulator is not imported, so robot-side commands (``replay``) stay free of numba."""
     if files:
+        from pioneer.sim.scenarios import SCENARIOS_ENV, load_env_scenarios
+
         paths = [str(Path(f).resolve()) for f in files]
         old = os.environ.get(SCENARIOS_ENV, "")
         os.environ[SCENARIOS_ENV] = os.pathsep.join([*filter(None, [old]), *paths])

@@ -342,22 +342,28 @@ def test_cli_export_refuses_bad_paths(tmp_path, capsys, bad):
 BLOCKED = """
 import importlib.abc, json, sys
 
-class BlockTorch(importlib.abc.MetaPathFinder):
+BLOCKED = ("torch", "numba", "llvmlite", "pioneer.sim")
+
+class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError(f"torch is blocked in this test ({name})")
+        if any(name == b or name.startswith(b + ".") for b in BLOCKED):
+            raise ImportError(f"{name} is blocked in this test")
         return None
 
-sys.meta_path.insert(0, BlockTorch())
-from pioneer.deploy.bag import replay_bag
+sys.meta_path.insert(0, Block())
+from pioneer.cli import main
 
-s = replay_bag(sys.argv[1], sys.argv[2], sys.argv[3], goal=(2.0, 1.0), progress=False)
-heavy = sorted(m for m in ("torch", "pioneer.learn", "pioneer.control") if m in sys.modules)
-print(json.dumps({"rows": s["rows"], "heavy": heavy}))
+argv = ["replay", "--bag", sys.argv[1], "--model", sys.argv[2], "--out", sys.argv[3]]
+rc = main([*argv, "--goal", "2", "1"])
+heavy = sorted(
+    m for m in ("torch", "numba", "pioneer.sim", "pioneer.learn", "pioneer.control")
+    if m in sys.modules
+)
+print(json.dumps({"rc": rc, "heavy": heavy}))
 """
 
 
-def test_bag_replay_runs_with_torch_blocked(student, scans, tmp_path):
+def test_cli_replay_runs_with_torch_numba_and_simulator_blocked(student, scans, tmp_path):
     _, onnx = student
     bag = write_scan_bag(tmp_path / "in", "sqlite3", scans[:3])
     out = tmp_path / "c.csv"
@@ -369,6 +375,7 @@ def test_bag_replay_runs_with_torch_blocked(student, scans, tmp_path):
         check=False,
     )
     assert proc.returncode == 0, proc.stderr
-    res = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert res == {"rows": 3, "heavy": []}
+    lines = proc.stdout.strip().splitlines()
+    assert json.loads(lines[-2])["rows"] == 3  # the CLI's summary
+    assert json.loads(lines[-1]) == {"rc": 0, "heavy": []}
     assert len(read_csv(out)[1]) == 3
