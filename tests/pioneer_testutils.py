@@ -132,3 +132,38 @@ def angle_diff(a: float, b: float) -> float:
     """Smallest absolute difference of two angles [rad]."""
     d = (a - b) % (2 * math.pi)
     return min(d, 2 * math.pi - d)
+
+
+# ------------------------------------------------------------------- regression references
+def keyed_runs(run: Any, names: Sequence[str], seeds: Sequence[int]) -> dict[str, np.ndarray]:
+    """``{"name/seed/key": array}`` of ``run(name, seed) -> {key: array}`` over all pairs."""
+    return {
+        f"{name}/{seed}/{key}": value
+        for name in names
+        for seed in seeds
+        for key, value in run(name, seed).items()
+    }
+
+
+def load_reference(path: Any) -> dict[str, np.ndarray]:
+    """A stored regression reference (npz, no pickle); a missing file fails the test."""
+    import pytest
+
+    if not path.exists():
+        pytest.fail(f"{path} is missing; regenerate it (see the test module's docstring)")
+    with np.load(path, allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}
+
+
+def regenerate_reference(path: Any, data: dict[str, np.ndarray], argv: Sequence[str]) -> None:
+    """The ``--regenerate`` entry of a regression test module: write ``data`` atomically."""
+    import sys
+
+    from pioneer.io import atomic_path
+
+    if list(argv) != ["--regenerate"]:
+        sys.exit("usage: python <test module> --regenerate")
+    path.parent.mkdir(exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **data)
+    print(f"wrote {path}")

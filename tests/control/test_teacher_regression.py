@@ -27,8 +27,12 @@ import numpy as np
 import pytest
 
 from pioneer.control.teacher import LookaheadTeacher, default_reward
-from pioneer.io import atomic_path
 from pioneer.sim import get_scenario, sample_state, step
+
+if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:
+    sys.path.insert(0, _TESTS)  # run as a script (--regenerate); under pytest conftest does it
+
+from pioneer_testutils import keyed_runs, load_reference, regenerate_reference
 
 REFERENCE = Path(__file__).with_name("data") / "teacher_regression.npz"
 SCENARIOS = ("hr-rl", "hl-rr")
@@ -63,21 +67,9 @@ def decisions(name: str, seed: int) -> dict[str, np.ndarray]:
     return {key: np.array(v) for key, v in out.items()}
 
 
-def _all() -> dict[str, np.ndarray]:
-    return {
-        f"{name}/{seed}/{key}": value
-        for name in SCENARIOS
-        for seed in SEEDS
-        for key, value in decisions(name, seed).items()
-    }
-
-
 @pytest.fixture(scope="module")
 def reference() -> dict[str, np.ndarray]:
-    if not REFERENCE.exists():
-        pytest.fail(f"{REFERENCE} is missing; run {Path(__file__).name} --regenerate")
-    with np.load(REFERENCE) as ref:
-        return {k: ref[k] for k in ref.files}
+    return load_reference(REFERENCE)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -105,9 +97,4 @@ def test_reference_is_informative(reference):
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] != ["--regenerate"]:
-        sys.exit("usage: test_teacher_regression.py --regenerate")
-    REFERENCE.parent.mkdir(exist_ok=True)
-    with atomic_path(REFERENCE) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, **_all())
-    print(f"wrote {REFERENCE}")
+    regenerate_reference(REFERENCE, keyed_runs(decisions, SCENARIOS, SEEDS), sys.argv[1:])

@@ -20,8 +20,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pioneer.io import atomic_path
 from pioneer.sim import get_scenario, observe, sample_state, step
+
+if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:
+    sys.path.insert(0, _TESTS)  # run as a script (--regenerate); under pytest conftest does it
+
+from pioneer_testutils import keyed_runs, load_reference, regenerate_reference
 
 REFERENCE = Path(__file__).with_name("data") / "regression.npz"
 SCENARIOS = ("hr-rl", "hl-rr", "static")
@@ -47,19 +51,9 @@ def trajectory(name: str, seed: int) -> dict[str, np.ndarray]:
     return {key: np.stack(v) for key, v in out.items()}
 
 
-def _all() -> dict[str, np.ndarray]:
-    return {
-        f"{name}/{seed}/{key}": value
-        for name in SCENARIOS
-        for seed in SEEDS
-        for key, value in trajectory(name, seed).items()
-    }
-
-
 @pytest.fixture(scope="module")
 def reference() -> dict[str, np.ndarray]:
-    with np.load(REFERENCE, allow_pickle=False) as data:
-        return {k: data[k] for k in data.files}
+    return load_reference(REFERENCE)
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
@@ -89,9 +83,4 @@ def test_the_reference_covers_humans_walls_and_collisions(reference):
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] != ["--regenerate"]:
-        sys.exit("usage: python tests/sim/test_regression.py --regenerate")
-    REFERENCE.parent.mkdir(exist_ok=True)
-    with atomic_path(REFERENCE) as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **_all())
-    print(f"wrote {REFERENCE}")
+    regenerate_reference(REFERENCE, keyed_runs(trajectory, SCENARIOS, SEEDS), sys.argv[1:])
