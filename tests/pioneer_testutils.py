@@ -167,3 +167,32 @@ def regenerate_reference(path: Any, data: dict[str, np.ndarray], argv: Sequence[
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **data)
     print(f"wrote {path}")
+
+
+# ---------------------------------------------------------------------- import hygiene
+# The prelude of a child script that must run without torch, numba or the simulator: importing
+# any of them raises ImportError (checked first), and ``heavy()`` lists the heavy modules
+# that got loaded anyway.
+ROBOT_SIDE_PRELUDE = """
+import importlib.abc, json, sys
+
+BLOCKED = ("torch", "numba", "llvmlite", "pioneer.sim")
+
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if any(name == b or name.startswith(b + ".") for b in BLOCKED):
+            raise ImportError(f"{name} is blocked in this test")
+        return None
+
+sys.meta_path.insert(0, Block())
+for name in BLOCKED:
+    try:
+        __import__(name)
+        raise SystemExit(f"the {name} blocker does not work")
+    except ImportError:
+        pass
+
+def heavy():
+    names = ("torch", "numba", "pioneer.sim", "pioneer.learn", "pioneer.control")
+    return sorted(m for m in names if m in sys.modules)
+"""

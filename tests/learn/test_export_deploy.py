@@ -23,7 +23,7 @@ from pioneer.learn.export import MDN_OUTPUTS
 from pioneer.sim.env import NavEnv
 from pioneer.sim.lidar import observation_from_scan
 from pioneer.sim.world import scan
-from pioneer_testutils import assert_house_message
+from pioneer_testutils import ROBOT_SIDE_PRELUDE, assert_house_message
 
 torch.set_num_threads(1)
 
@@ -215,25 +215,9 @@ def test_runtime_refuses_bad_files_and_inputs(students, tmp_path):
 
 
 # ------------------------------------------------------------------------------ hygiene
-BLOCKED = """
-import importlib.abc, json, sys
-
-BLOCKED = ("torch", "numba", "llvmlite", "pioneer.sim")
-
-class Block(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if any(name == b or name.startswith(b + ".") for b in BLOCKED):
-            raise ImportError(f"{name} is blocked in this test")
-        return None
-
-sys.meta_path.insert(0, Block())
-for name in BLOCKED:
-    try:
-        __import__(name)
-        raise SystemExit(f"the {name} blocker does not work")
-    except ImportError:
-        pass
-
+BLOCKED = (
+    ROBOT_SIDE_PRELUDE
+    + """
 import math
 import numpy as np
 from pioneer.deploy import StudentRuntime
@@ -241,12 +225,9 @@ from pioneer.deploy import StudentRuntime
 rt = StudentRuntime(sys.argv[1])
 ranges = [1.0 + 0.5 * math.cos(3 * i * 2 * math.pi / 360) for i in range(360)]
 d = rt.step(ranges, -math.pi, 2 * math.pi / 360, 5.0, (2.0, 1.0))
-heavy = sorted(
-    m for m in ("torch", "numba", "pioneer.sim", "pioneer.learn", "pioneer.control")
-    if m in sys.modules
-)
-print(json.dumps({"decision": list(d), "heavy": heavy}))
+print(json.dumps({"decision": list(d), "heavy": heavy()}))
 """
+)
 
 
 def test_deploy_runs_with_torch_numba_and_simulator_blocked(students):
