@@ -89,6 +89,11 @@ def make_state(
         h_delay=np.array([h.get("delay", 0.0) for h in humans], dtype=float).reshape(1, n),
         h_wait_for=wait,
         h_home=pos.copy(),
+        h_release=np.array(
+            [h.get("release", len(w)) for h, w in zip(humans, wps_list, strict=True)],
+            dtype=np.int64,
+        ).reshape(1, n),
+        h_reacts=np.array([h.get("reacts", True) for h in humans], dtype=np.bool_).reshape(1, n),
     )
 
 

@@ -91,6 +91,8 @@ def _coerce(hint: Any, value: Any) -> Any:
         for arg in typing.get_args(hint):
             if isinstance(arg, type) and issubclass(arg, Config) and isinstance(value, dict):
                 return arg.from_dict(value)
+            if typing.get_origin(arg) is tuple and isinstance(value, list | tuple):
+                return _coerce(arg, value)
     return value
 
 

@@ -6,8 +6,11 @@ trajectory fails here instead of silently changing every dataset, teacher label 
 made with it. Continuous values are compared to 1e-9 (a different CPU's libm may differ in
 the last bits; over 25 steps that stays far below this), discrete ones exactly.
 
-After an *intended* change of the dynamics, regenerate the reference and say why in the
-commit::
+Two references: ``regression.npz`` was made before the paper world existed and pins the
+compact world (``hr-rl-compact``, ``hl-rr-compact``; stored under the names ``hr-rl`` and
+``hl-rr`` it had then) and the static study, so the earlier world stays reproducible bit for
+bit; ``regression-paper.npz`` pins the paper world (``hr-rl``, ``hl-rr``). After an *intended*
+change of the paper world's dynamics, regenerate that one and say why in the commit::
 
     .venv/bin/python tests/sim/test_regression.py --regenerate
 """
@@ -28,7 +31,10 @@ if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:
 from pioneer_testutils import keyed_runs, load_reference, regenerate_reference
 
 REFERENCE = Path(__file__).with_name("data") / "regression.npz"
-SCENARIOS = ("hr-rl", "hl-rr", "static")
+PAPER_REFERENCE = Path(__file__).with_name("data") / "regression-paper.npz"
+SCENARIOS = ("hr-rl", "hl-rr", "static")  # the keys of the earlier reference …
+COMPACT = {"hr-rl": "hr-rl-compact", "hl-rr": "hl-rr-compact", "static": "static"}  # … today
+PAPER = ("hr-rl", "hl-rr")
 SEEDS = (0, 1, 2)
 N_COPIES, N_STEPS = 4, 25
 CONTINUOUS = ("robot", "h_pos", "h_vel", "clearance", "wall_clearance", "path_length", "obs")
@@ -56,16 +62,28 @@ def reference() -> dict[str, np.ndarray]:
     return load_reference(REFERENCE)
 
 
+@pytest.fixture(scope="module")
+def paper_reference() -> dict[str, np.ndarray]:
+    return load_reference(PAPER_REFERENCE)
+
+
+def _assert_matches(now: dict[str, np.ndarray], ref: dict[str, np.ndarray], prefix: str) -> None:
+    for key in CONTINUOUS:
+        np.testing.assert_allclose(now[key], ref[f"{prefix}/{key}"], rtol=0, atol=1e-9, err_msg=key)
+    for key in DISCRETE:
+        np.testing.assert_array_equal(now[key], ref[f"{prefix}/{key}"], err_msg=key)
+
+
 @pytest.mark.parametrize("name", SCENARIOS)
 @pytest.mark.parametrize("seed", SEEDS)
-def test_seeded_trajectories_match_the_stored_reference(name, seed, reference):
-    now = trajectory(name, seed)
-    for key in CONTINUOUS:
-        np.testing.assert_allclose(
-            now[key], reference[f"{name}/{seed}/{key}"], rtol=0, atol=1e-9, err_msg=key
-        )
-    for key in DISCRETE:
-        np.testing.assert_array_equal(now[key], reference[f"{name}/{seed}/{key}"], err_msg=key)
+def test_the_compact_world_reproduces_the_earlier_reference(name, seed, reference):
+    _assert_matches(trajectory(COMPACT[name], seed), reference, f"{name}/{seed}")
+
+
+@pytest.mark.parametrize("name", PAPER)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_the_paper_world_matches_its_reference(name, seed, paper_reference):
+    _assert_matches(trajectory(name, seed), paper_reference, f"{name}/{seed}")
 
 
 def test_the_reference_covers_humans_walls_and_collisions(reference):
@@ -83,4 +101,4 @@ def test_the_reference_covers_humans_walls_and_collisions(reference):
 
 
 if __name__ == "__main__":
-    regenerate_reference(REFERENCE, keyed_runs(trajectory, SCENARIOS, SEEDS), sys.argv[1:])
+    regenerate_reference(PAPER_REFERENCE, keyed_runs(trajectory, PAPER, SEEDS), sys.argv[1:])

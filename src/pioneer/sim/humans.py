@@ -24,11 +24,14 @@ Deviations from a bare social-force model, all documented in docs/simulator.md:
   that stalls (speed < settle_speed) within settle_distance of its current target takes it as
   reached: with 0.6 m bodies two boarders cannot both reach spots in a 1.25 m-wide half cabin.
 - A human on its last leg whose body has fully left the map bounds is removed (GONE).
-- A human may have a start delay and may wait until given other humans have left the map or
-  arrived (boarders let the exiting passenger out of the doorway first); until then it
-  holds its start position with the same social-force drive, so it can be nudged aside.
-  Pure social force with the paper's 0.6 m bodies deadlocks in a 1.8 m door when both flows
-  meet there.
+- A human may have a start delay and may wait until given other humans have left the map,
+  arrived, or passed their release waypoint (boarders let the exiting passenger out of the
+  doorway first); until then it holds its start position with the same social-force drive,
+  so it can be nudged aside. Pure social force with the paper's 0.6 m bodies deadlocks in a
+  1.8 m door when both flows meet there.
+- The robot term is per human: a human whose ``reacts`` flag is 0 ignores the robot (the
+  robot is invisible to it, CrowdNav++'s ``robot.visible = False``); A_r = 0 makes every
+  human ignore it. The paper's humans are uncooperative (§V-B), see docs/simulator.md.
 """
 
 from __future__ import annotations
@@ -40,11 +43,19 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_positive
+from pioneer.config import Config, check_nonnegative, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.geometry import closest_point_on_segment, norm2d, wall_offsets
 
-__all__ = ["ARRIVED", "GONE", "WALKING", "SocialForceConfig", "sfm_substep"]
+__all__ = [
+    "A_ROBOT_WEAK",
+    "ARRIVED",
+    "GONE",
+    "PRESETS",
+    "WALKING",
+    "SocialForceConfig",
+    "sfm_substep",
+]
 
 WALKING = 0  # moves toward its waypoints
 ARRIVED = 1  # reached its final goal; stays as a static obstacle
@@ -52,14 +63,36 @@ GONE = 2  # left the map; ignored by forces, sensing and collisions
 EXP_CUTOFF = -12.0  # repulsion terms below A·e^-12 (< 1e-5 m/s²) are skipped
 
 
+A_ROBOT_WEAK = 0.5  # [m/s²] the paper world's human–robot strength (docs/calibration.md)
+
+# Named parameter sets: overrides of the defaults (the ``paper`` preset).
+PRESETS: dict[str, dict[str, float]] = {
+    "paper": {},
+    # The paper's prior implementations (REFERENCES.md): both use K = 1 (τ = 1 s).
+    "cvar-bf": {"a_robot": 2.0},  # reacting humans use the same A, B for the robot
+    "crowdnav": {"b_human": 1.0, "a_robot": 0.0, "b_robot": 1.0, "b_wall": 1.0},
+    # The earlier default (the compact world): τ = 0.5 s, humans make way for the robot.
+    "compact": {"tau": 0.5, "a_robot": 2.0},
+    # Sensitivity study (docs/results.md): how humans react to the robot.
+    "robot-invisible": {"a_robot": 0.0},
+    "robot-as-human": {"a_robot": 2.0},
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class SocialForceConfig(Config):
-    """Parameters of the social-force model (one named preset: ``cvar-bf``)."""
+    """Parameters of the social-force model; the defaults are the ``paper`` preset.
 
-    tau: float = 0.5  # [s] relaxation time τ of the driving term
+    The paper's humans are uncooperative (§V-B): they avoid each other and the walls, and the
+    robot adds only a weak repulsive term, so a robot that barges in is not given way to. The
+    prior implementations the paper follows use τ = 1 s (K = 1). ``a_robot`` and ``tau`` of
+    the paper world were fixed by world statistics (docs/calibration.md).
+    """
+
+    tau: float = 1.0  # [s] relaxation time τ of the driving term (CrowdNav++, CVaR-BF: K = 1)
     a_human: float = 2.0  # [m/s²] A, human–human repulsion strength
     b_human: float = 0.5  # [m] B, human–human repulsion range
-    a_robot: float = 2.0  # [m/s²] human–robot repulsion strength (humans react to the robot)
+    a_robot: float = A_ROBOT_WEAK  # [m/s²] human–robot repulsion strength; 0: robot invisible
     b_robot: float = 0.5  # [m] human–robot repulsion range
     a_wall: float = 2.0  # [m/s²] human–wall repulsion strength
     b_wall: float = 0.2  # [m] human–wall repulsion range (Helbing–Molnár's R = 0.2 m)
@@ -72,20 +105,19 @@ class SocialForceConfig(Config):
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            check_positive("SocialForceConfig", f.name, getattr(self, f.name))
+            if f.name == "a_robot":
+                check_nonnegative("SocialForceConfig", f.name, self.a_robot)
+            else:
+                check_positive("SocialForceConfig", f.name, getattr(self, f.name))
 
     @classmethod
     def preset(cls, name: str) -> SocialForceConfig:
-        """Named parameter sets: ``cvar-bf`` (default, A=2, B=0.5) and ``crowdnav`` (A=2, B=1)."""
-        presets = {
-            "cvar-bf": cls(),
-            "crowdnav": cls(b_human=1.0, b_robot=1.0, b_wall=1.0),
-        }
-        if name not in presets:
+        """A named parameter set (see :data:`PRESETS`)."""
+        if name not in PRESETS:
             raise ConfigError(
-                expect("social_force preset", f"one of {sorted(presets)}", name, "pick a preset")
+                expect("social_force preset", f"one of {sorted(PRESETS)}", name, "pick a preset")
             )
-        return presets[name]
+        return cls(**PRESETS[name])
 
     def as_array(self) -> NDArray[np.float64]:
         """Packed parameters for the numba kernels (order fixed by ``_P_*`` indices)."""
@@ -120,6 +152,8 @@ def sfm_substep(
     status: NDArray[np.int8],  # (B, N), updated in place
     delay: NDArray[np.float64],  # (B, N) [s] a human starts walking at t >= delay
     wait_for: NDArray[np.int64],  # (B, N, N) 1 where human i waits until human j left/arrived
+    release: NDArray[np.int64],  # (B, N) human j's waiters go once its waypoint index >= this
+    reacts: NDArray[np.bool_],  # (B, N) False: human i ignores the robot
     home: NDArray[np.float64],  # (B, N, 2) [m] where a waiting human holds its position
     fx: NDArray[np.float64],  # (N,) scratch: force x (no allocation per substep)
     fy: NDArray[np.float64],  # (N,) scratch: force y
@@ -164,7 +198,7 @@ def sfm_substep(
         wall_d[i] = np.inf
         r_i = status[b, i] == WALKING and t_now >= delay[b, i]
         for j in range(n):
-            if wait_for[b, i, j] and status[b, j] == WALKING:
+            if wait_for[b, i, j] and status[b, j] == WALKING and wp_index[b, j] < release[b, j]:
                 r_i = False
         ready[i] = 1.0 if r_i else 0.0
     # Forces are computed from the positions at the start of the substep for every human.
@@ -215,14 +249,15 @@ def sfm_substep(
                 mag = a_h * math.exp(z)
                 ax += mag * dx / d
                 ay += mag * dy / d
-        dx = px - rx
-        dy = py - ry
-        d = norm2d(dx, dy)
-        z = (radius[b, i] + r_robot - d) / b_r
-        if d > 1e-9 and z > EXP_CUTOFF:
-            mag = a_r * math.exp(z)
-            ax += mag * dx / d
-            ay += mag * dy / d
+        if reacts[b, i] and a_r > 0.0:
+            dx = px - rx
+            dy = py - ry
+            d = norm2d(dx, dy)
+            z = (radius[b, i] + r_robot - d) / b_r
+            if d > 1e-9 and z > EXP_CUTOFF:
+                mag = a_r * math.exp(z)
+                ax += mag * dx / d
+                ay += mag * dy / d
         # Walls in two passes: first the geometry of every wall, branch-free so that LLVM
         # vectorises it, then the repulsion of the walls in range, in wall order (the same
         # operations as one scalar pass, so bit-for-bit the same forces).

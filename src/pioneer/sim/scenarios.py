@@ -21,7 +21,7 @@ import numpy as np
 
 from pioneer.config import Config, check_nonnegative, check_positive, check_range
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
-from pioneer.sim.humans import ARRIVED, WALKING
+from pioneer.sim.humans import ARRIVED, WALKING, SocialForceConfig
 from pioneer.sim.world import SimConfig, State, World
 
 __all__ = [
@@ -87,9 +87,25 @@ class HumanSpec(Config):
     static: bool = False  # True: never moves (an obstacle from t = 0)
     start_delay: tuple[float, float] = (0.0, 0.0)  # [s] sampled; stands still until then
     wait_for: tuple[int, ...] = ()  # indices of humans that must have left/arrived first
+    # Those waiting for this human go once it heads for waypoint index >= this (None: only
+    # once it has arrived or left the map); e.g. 2 = once past its second waypoint.
+    release_waypoint: int | None = None
+    reacts_to_robot: bool = True  # False: the robot is invisible to this human
 
     def __post_init__(self) -> None:
         check_positive("HumanSpec", "radius", self.radius)
+        if self.release_waypoint is not None and not (
+            isinstance(self.release_waypoint, int)
+            and 1 <= self.release_waypoint <= len(self.waypoints)
+        ):
+            raise ScenarioError(
+                expect(
+                    "HumanSpec.release_waypoint",
+                    f"None or an integer in 1..{len(self.waypoints)} (its waypoints)",
+                    self.release_waypoint,
+                    "fix it or use null",
+                )
+            )
         check_range("HumanSpec", "start_delay", *self.start_delay)
         if not self.v_pref_choices or any(
             not (math.isfinite(v) and v >= 0) for v in self.v_pref_choices
@@ -183,29 +199,69 @@ def _wall_distance(p: np.ndarray, walls: np.ndarray) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class ElevatorLayout(Config):
-    """Geometry and population of the elevator co-boarding scenario (paper §V-B)."""
+    """Geometry and population of the elevator co-boarding scenario (paper §V-B, SPEC 1.5).
+
+    The defaults are the paper world: a 4 × 4 m lobby in front of the attached 2.5 × 2.7 m
+    cabin. Positions are in HR-RL coordinates (humans board to the right half); ``human_side =
+    "left"`` mirrors every x. A start-region field set to ``None`` is derived from the geometry
+    by the rules of the earlier compact world (:meth:`compact`), which stays reproducible.
+    The values of the free fields were chosen by world statistics (docs/calibration.md).
+    """
 
     human_side: str = "right"  # "right" → HR-RL (robot goal left); "left" → HL-RR
     cabin_width: float = 2.5  # [m] Schindler 6000
     cabin_depth: float = 2.7  # [m]
     door_width: float = 1.8  # [m]
     lobby_width: float = 4.0  # [m] walled on its left and right
-    lobby_depth: float = 1.3  # [m] the far side (y = −lobby_depth) is open
+    lobby_depth: float = 4.0  # [m] the far side (y = −lobby_depth) is open
     n_boarding: int = 2  # humans boarding from the lobby (alternating sides of the robot)
     n_exiting: int = 1  # humans leaving the cabin through the door
     human_radius: float = 0.6  # [m] the paper's value
     v_pref_choices: tuple[float, ...] = (0.5, 0.6, 0.7)  # [m/s]
     robot_start_half_width: float = 0.25  # [m] robot start x ∈ ±this
+    robot_start_y: tuple[float, float] | None = (-2.5, -2.1)  # [m] None: compact rule
+    boarder_x: tuple[float, float] | None = (1.2, 1.35)  # [m] |x| of a boarder's start
+    boarder_y: tuple[float, float] | None = (-1.4, -0.75)  # [m] beside the door
     boarding_delay: tuple[float, float] = (0.5, 1.5)  # [s] boarders' reaction time
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
+    # After the door, the exiting passenger turns aside through these points (HR-RL: toward
+    # the robot's goal side, across its way), then leaves through the open far side below
+    # the last one. None: straight out (compact rule).
+    exit_waypoints: tuple[Point, ...] | None = ((-1.2, -1.9),)  # [m]
+    # Boarders go once the exiting passenger heads for this waypoint index (1 = the one in
+    # front of the door, 2 = the first after it, …); None: once it has left the map.
+    exit_release_waypoint: int | None = 2
+    boarders_react_to_robot: bool = True  # False: the robot is invisible to the boarders
+    exiting_react_to_robot: bool = True  # False: … to the exiting passengers
     margin: float = 0.05  # [m] extra clearance from walls for sampled positions
+    min_start_gap: float = 0.1  # [m] clearance between all bodies and walls at t = 0
+
+    @classmethod
+    def compact(cls, human_side: str = "right") -> ElevatorLayout:
+        """The earlier default world: the 4 × 4 m map contains the cabin (1.3 m lobby)."""
+        return cls(
+            human_side=human_side,
+            lobby_depth=1.3,
+            robot_start_y=None,
+            boarder_x=None,
+            boarder_y=None,
+            exit_waypoints=None,
+            exit_release_waypoint=None,
+            min_start_gap=0.05,
+        )
 
     def __post_init__(self) -> None:
         for name in ("cabin_width", "cabin_depth", "door_width", "lobby_width", "lobby_depth"):
             check_positive("ElevatorLayout", name, getattr(self, name))
         check_positive("ElevatorLayout", "human_radius", self.human_radius)
         check_nonnegative("ElevatorLayout", "margin", self.margin)
+        check_nonnegative("ElevatorLayout", "min_start_gap", self.min_start_gap)
         check_nonnegative("ElevatorLayout", "robot_start_half_width", self.robot_start_half_width)
+        check_range("ElevatorLayout", "boarding_delay", *self.boarding_delay)
+        for name in ("robot_start_y", "boarder_x", "boarder_y"):
+            value = getattr(self, name)
+            if value is not None:
+                check_range("ElevatorLayout", name, *value)
         if self.human_side not in ("right", "left"):
             raise ScenarioError(
                 expect("ElevatorLayout.human_side", "'right' or 'left'", self.human_side, "fix")
@@ -232,6 +288,17 @@ class ElevatorLayout(Config):
             n = getattr(self, name)
             if not isinstance(n, int) or n < 0:
                 raise ScenarioError(expect(f"ElevatorLayout.{name}", "an integer >= 0", n, "fix"))
+        n_route = 2 + len(self.exit_waypoints or ())
+        k = self.exit_release_waypoint
+        if k is not None and not (isinstance(k, int) and 1 <= k <= n_route):
+            raise ScenarioError(
+                expect(
+                    "ElevatorLayout.exit_release_waypoint",
+                    f"null or an integer in 1..{n_route} (the exit route's waypoints)",
+                    k,
+                    "fix it",
+                )
+            )
 
 
 def elevator_scenario(
@@ -240,12 +307,14 @@ def elevator_scenario(
     """Build the elevator co-boarding scenario (HR-RL by default) from a layout.
 
     Placement (human side = right; "left" mirrors every x):
-    - the robot starts in the lobby centre, facing the door, goal in the left cabin half;
+    - the robot starts in the lobby, between the boarders, facing the door; its goal is in the
+      left cabin half;
     - boarding humans start in the lobby at alternating sides of the robot and walk through
       the door (waypoints in front of and behind the door centre) to stacked spots in the
-      right cabin half;
-    - exiting humans start in the cabin centre and leave through the door and the open far
-      side of the lobby, where they are removed.
+      right cabin half, once the exiting passengers are out of the doorway;
+    - exiting humans start in the cabin centre, leave through the door, turn aside through
+      ``exit_waypoints`` and leave through the open far side of the lobby, where they are
+      removed.
     """
     lay = layout or ElevatorLayout()
     sim = sim or SimConfig()
@@ -278,20 +347,20 @@ def elevator_scenario(
     bounds = (-hw_l, hw_l, -ld, depth)
     front = (0.0, -(r_h + 0.1))  # waypoint in front of the door centre
     behind = (0.0, r_h + 0.1)  # waypoint just inside the cabin
-    # Lobby start rows may reach a little beyond the open far side (y = −lobby_depth).
-    lobby_y = (-ld - 0.4, -(r_h + m + 0.45))
     side = 1.0 if lay.human_side == "right" else -1.0
     sx = lay.robot_start_half_width
+    # Compact rules: lobby start rows may reach a little beyond the open far side.
+    lobby_y = lay.boarder_y or (-ld - 0.4, -(r_h + m + 0.45))
     humans: list[HumanSpec] = []
     # Boarders: alternating right/left of the robot; spots stacked front-to-back in one half.
-    x_in = sx + r_r + r_h + 2 * m
-    x_out = hw_l - r_h - m
+    x_in, x_out = lay.boarder_x or (sx + r_r + r_h + 2 * m, hw_l - r_h - m)
     # Spots run from the deep outer corner (first boarder) to beside the door (last), so a
     # later boarder never has to pass an earlier one: with A = 2 m/s² at contact and a drive of
     # at most 1.4 m/s², two 0.6 m bodies cannot come closer than ≈ 1.4 m.
     deep = (hw_c - r_h - m - 0.15, hw_c - r_h - m, depth - r_h - m - 0.3, depth - r_h - m)
     near = (0.1, 0.35, r_h + 0.15, r_h + 0.35)
     n_b = lay.n_boarding
+    exiting = tuple(range(n_b, n_b + lay.n_exiting))
     for k in range(n_b):
         lobby_side = 1.0 if k % 2 == 0 else -1.0
         start = Region(
@@ -301,7 +370,6 @@ def elevator_scenario(
         f = k / (n_b - 1) if n_b > 1 else 0.0
         box = [(1 - f) * d + f * e for d, e in zip(deep, near, strict=True)]
         spot = Region(x=(box[0], box[1]), y=(box[2], box[3]))
-        exiting = tuple(range(n_b, n_b + lay.n_exiting))
         wait = (*exiting, *((k - 1,) if k > 0 else ())) if lay.boarders_queue else ()
         spot_s = spot if side > 0 else spot.mirrored()
         humans.append(
@@ -314,31 +382,38 @@ def elevator_scenario(
                 v_pref_choices=lay.v_pref_choices,
                 start_delay=lay.boarding_delay,
                 wait_for=wait,
+                reacts_to_robot=lay.boarders_react_to_robot,
             )
         )
+    aside = tuple((side * x, y) for x, y in lay.exit_waypoints or ())  # HR-RL coordinates
+    exit_x = (aside[-1][0], aside[-1][0]) if aside else (-0.3, 0.3)
     for _ in range(lay.n_exiting):
         humans.append(
             HumanSpec(
                 role="exiting",
                 start=Region(x=(-0.5, 0.5), y=(r_h + 0.3, min(r_h + 0.9, depth - r_h - m))),
-                goal=Region(x=(-0.3, 0.3), y=(-ld - 1.5, -ld - 1.5)),
-                waypoints=(behind, front),
+                goal=Region(x=exit_x, y=(-ld - 1.5, -ld - 1.5)),
+                waypoints=(behind, front, *aside),
                 radius=r_h,
                 v_pref_choices=lay.v_pref_choices,
+                release_waypoint=lay.exit_release_waypoint,
+                reacts_to_robot=lay.exiting_react_to_robot,
             )
         )
     goal = Region(
         x=(-(hw_c - r_r - 0.15), -min(hw_c - r_r - 0.15, 0.45)), y=(1.0, depth - r_r - 0.2)
     )
     default_name = "hr-rl" if side > 0 else "hl-rr"
+    robot_y = lay.robot_start_y or (-ld + 0.25, -(r_r + 0.35))
     return ScenarioConfig(
         name=name or default_name,
         walls=walls,
         bounds=bounds,
-        robot_start=Region(x=(-sx, sx), y=(-ld + 0.25, -(r_r + 0.35))),
+        robot_start=Region(x=(-sx, sx), y=robot_y),
         robot_goal=goal if side > 0 else goal.mirrored(),
         robot_heading=(math.pi / 2 - 0.15, math.pi / 2 + 0.15),
         humans=tuple(humans),
+        min_start_gap=lay.min_start_gap,
         sim=sim,
     )
 
@@ -401,6 +476,12 @@ def static_study_scenario(
 # --------------------------------------------------------------------------------------------
 # Registry and sampling
 
+def _compact(side: str, name: str) -> ScenarioConfig:
+    """The earlier default world (reproducible: the same states, bit for bit)."""
+    sim = SimConfig(social_force=SocialForceConfig.preset("compact"))
+    return elevator_scenario(ElevatorLayout.compact(side), sim=sim, name=name)
+
+
 _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
     "hr-rl": lambda: elevator_scenario(ElevatorLayout(human_side="right")),
     "hl-rr": lambda: elevator_scenario(ElevatorLayout(human_side="left")),
@@ -410,6 +491,8 @@ _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
     "hl-rr-r03": lambda: elevator_scenario(
         ElevatorLayout(human_side="left", human_radius=0.3), name="hl-rr-r03"
     ),
+    "hr-rl-compact": lambda: _compact("right", "hr-rl-compact"),
+    "hl-rr-compact": lambda: _compact("left", "hl-rr-compact"),
     "static": static_study_scenario,
 }
 _BUILTIN = frozenset(_REGISTRY)
@@ -701,6 +784,14 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
             [[int(j in h.wait_for) for j in range(n)] for h in cfg.humans],
             dtype=np.int64,
         ).reshape(1, n, n),
+        h_release=np.array(
+            [
+                k if (k := h.release_waypoint) is not None else n_wp[i]
+                for i, h in enumerate(cfg.humans)
+            ],
+            dtype=np.int64,
+        ).reshape(1, n),
+        h_reacts=np.array([h.reacts_to_robot for h in cfg.humans], dtype=np.bool_).reshape(1, n),
     )
 
 

@@ -154,6 +154,8 @@ class State:
     h_delay: F64  # (B, N) time at which each human starts walking [s]
     h_wait_for: NDArray[np.int64]  # (B, N, N) 1: human i waits until human j left/arrived
     h_home: F64  # (B, N, 2) position a waiting human holds [m]
+    h_release: NDArray[np.int64]  # (B, N) j's waiters go once j's waypoint index >= this
+    h_reacts: NDArray[np.bool_]  # (B, N) the human reacts to the robot (False: ignores it)
 
     def __eq__(self, other: object) -> bool:
         """Value equality: every array equal (states are values, e.g. in ``info``)."""
@@ -254,6 +256,8 @@ def _step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> 
         s.h_status,
         s.h_delay,
         s.h_wait_for,
+        s.h_release,
+        s.h_reacts,
         s.h_home,
         world.walls,
         world.wall_table,
@@ -291,6 +295,8 @@ def _step_kernel(
     hstatus: NDArray[np.int8],
     hdelay: F64,
     hwait: NDArray[np.int64],
+    hrelease: NDArray[np.int64],
+    hreacts: NDArray[np.bool_],
     hhome: F64,
     walls: F64,
     wall_tab: F64,
@@ -341,6 +347,8 @@ def _step_kernel(
                 hstatus,
                 hdelay,
                 hwait,
+                hrelease,
+                hreacts,
                 hhome,
                 fx,
                 fy,
