@@ -296,6 +296,21 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from pioneer.eval.calibration import BANDS, calibrate
+
+    res = calibrate(args.scenario, args.episodes, args.out, args.workers)
+    for name, st in res["scenarios"].items():
+        cells = []
+        for key in (*BANDS, "teacher_risky_frame_share_gap", "risky_at_start_share"):
+            lo_hi = BANDS.get(key)
+            mark = "" if lo_hi is None else (" ok" if st["within_band"][key] else " OUT")
+            cells.append(f"{key} {st[key]:.3g}{mark}")
+        print(f"{name}: " + "; ".join(cells))
+    print(f"wrote {Path(args.out) / 'calibration.json'} ({res['elapsed_s']:.0f} s)")
+    return 0
+
+
 def _cmd_distill(args: argparse.Namespace) -> int:
     from pioneer.learn.dagger import DaggerConfig, run_dagger
 
@@ -436,6 +451,15 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", default="out/reproduce")
     rp.add_argument("--workers", type=int, help="processes (default: all cores)")
     rp.set_defaults(func=_cmd_reproduce)
+
+    cal = sub.add_parser(
+        "calibrate", help="world statistics beside the paper's evidence (validation seeds)"
+    )
+    cal.add_argument("--scenario", nargs="+", default=["hr-rl", "hl-rr"], help="hr-rl hl-rr …")
+    cal.add_argument("--episodes", type=int, default=100, help="validation episodes per scenario")
+    cal.add_argument("--out", required=True, help="folder for calibration.json")
+    cal.add_argument("--workers", type=int, help="processes (default: all cores)")
+    cal.set_defaults(func=_cmd_calibrate)
 
     d = sub.add_parser("distill", help="DAgger: distil the teacher into a LiDAR-only student")
     d.add_argument("--scenario", default="hr-rl", help="hr-rl, hl-rr, …")

@@ -12,8 +12,11 @@ relative): the float32 density evaluation's last bits depend on the BLAS kernels
 (and on the number of feasible rows), so a different machine may legitimately break an exact
 tie the other way. Scores are compared to ``SCORE_RTOL``.
 
-After an *intended* change of the teacher or its reward, regenerate the reference and say why
-in the commit::
+Two references: ``teacher_regression.npz`` pins the compact world (``hr-rl-compact``,
+``hl-rr-compact``, with their shipped demos; stored under the names ``hr-rl`` and ``hl-rr`` it
+had before the paper world), ``teacher_regression_paper.npz`` the paper world. After an
+*intended* change of the teacher or its reward, regenerate the paper one and say why in the
+commit::
 
     .venv/bin/python tests/control/test_teacher_regression.py --regenerate
 """
@@ -35,7 +38,9 @@ if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:
 from pioneer_testutils import keyed_runs, load_reference, regenerate_reference
 
 REFERENCE = Path(__file__).with_name("data") / "teacher_regression.npz"
+PAPER_REFERENCE = Path(__file__).with_name("data") / "teacher_regression_paper.npz"
 SCENARIOS = ("hr-rl", "hl-rr")
+COMPACT = {"hr-rl": "hr-rl-compact", "hl-rr": "hl-rr-compact"}  # the earlier reference's worlds
 SEEDS = (0, 1, 2)
 N_DECISIONS = 12  # per seed, one every STRIDE steps (0.1 s each) of a random drive
 STRIDE = 5
@@ -72,10 +77,24 @@ def reference() -> dict[str, np.ndarray]:
     return load_reference(REFERENCE)
 
 
+@pytest.fixture(scope="module")
+def paper_reference() -> dict[str, np.ndarray]:
+    return load_reference(PAPER_REFERENCE)
+
+
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_teacher_decisions_match_reference(reference, name, seed):
-    now = decisions(name, seed)
+    _check(decisions(COMPACT[name], seed), reference, name, seed)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_teacher_decisions_in_the_paper_world_match_reference(paper_reference, name, seed):
+    _check(decisions(name, seed), paper_reference, name, seed)
+
+
+def _check(now: dict[str, np.ndarray], reference: dict[str, np.ndarray], name: str, seed: int):
     ref = {key: reference[f"{name}/{seed}/{key}"] for key in now}
     np.testing.assert_array_equal(now["n_feasible"], ref["n_feasible"])
     np.testing.assert_allclose(now["score"], ref["score"], rtol=SCORE_RTOL, atol=1e-9)
@@ -97,4 +116,4 @@ def test_reference_is_informative(reference):
 
 
 if __name__ == "__main__":
-    regenerate_reference(REFERENCE, keyed_runs(decisions, SCENARIOS, SEEDS), sys.argv[1:])
+    regenerate_reference(PAPER_REFERENCE, keyed_runs(decisions, SCENARIOS, SEEDS), sys.argv[1:])

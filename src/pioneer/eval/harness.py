@@ -17,15 +17,14 @@ import dataclasses
 import json
 import os
 import time
-import zlib
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.seeds import evaluation_seed
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
 
@@ -128,9 +127,9 @@ class Task:
 
 
 def episode_seed(scenario: str, seed: int, trial: int) -> int:
-    """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` (deterministic)."""
-    ss = np.random.SeedSequence([zlib.crc32(scenario.encode()), int(seed), int(trial)])
-    return int(ss.generate_state(1, dtype=np.uint32)[0])
+    """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` (deterministic;
+    the evaluation seeds of :mod:`pioneer.seeds`)."""
+    return evaluation_seed(scenario, seed, trial)
 
 
 # ------------------------------------------------------------------------------ worker side

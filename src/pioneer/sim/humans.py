@@ -69,10 +69,10 @@ A_ROBOT_WEAK = 0.5  # [m/s²] the paper world's human–robot strength (docs/cal
 PRESETS: dict[str, dict[str, float]] = {
     "paper": {},
     # The paper's prior implementations (REFERENCES.md): both use K = 1 (τ = 1 s).
-    "cvar-bf": {"a_robot": 2.0},  # reacting humans use the same A, B for the robot
-    "crowdnav": {"b_human": 1.0, "a_robot": 0.0, "b_robot": 1.0, "b_wall": 1.0},
-    # The earlier default (the compact world): τ = 0.5 s, humans make way for the robot.
-    "compact": {"tau": 0.5, "a_robot": 2.0},
+    "cvar-bf": {"tau": 1.0, "a_robot": 2.0},  # reacting humans: same A, B for the robot
+    "crowdnav": {"tau": 1.0, "b_human": 1.0, "a_robot": 0.0, "b_robot": 1.0, "b_wall": 1.0},
+    # The earlier default (the compact world): humans make way for the robot as for a human.
+    "compact": {"a_robot": 2.0},
     # Sensitivity study (docs/results.md): how humans react to the robot.
     "robot-invisible": {"a_robot": 0.0},
     "robot-as-human": {"a_robot": 2.0},
@@ -84,12 +84,13 @@ class SocialForceConfig(Config):
     """Parameters of the social-force model; the defaults are the ``paper`` preset.
 
     The paper's humans are uncooperative (§V-B): they avoid each other and the walls, and the
-    robot adds only a weak repulsive term, so a robot that barges in is not given way to. The
-    prior implementations the paper follows use τ = 1 s (K = 1). ``a_robot`` and ``tau`` of
-    the paper world were fixed by world statistics (docs/calibration.md).
+    robot adds only a weak repulsive term, so a robot that barges in is not given way to.
+    ``a_robot`` and ``tau`` of the paper world were fixed by world statistics
+    (docs/calibration.md): with the prior implementations' τ = 1 s (K = 1) the paper's 0.6 m
+    humans jam in the 4 m lobby even without a robot, with Helbing–Molnár's 0.5 s they do not.
     """
 
-    tau: float = 1.0  # [s] relaxation time τ of the driving term (CrowdNav++, CVaR-BF: K = 1)
+    tau: float = 0.5  # [s] relaxation time τ of the driving term (Helbing–Molnár)
     a_human: float = 2.0  # [m/s²] A, human–human repulsion strength
     b_human: float = 0.5  # [m] B, human–human repulsion range
     a_robot: float = A_ROBOT_WEAK  # [m/s²] human–robot repulsion strength; 0: robot invisible

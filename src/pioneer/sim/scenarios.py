@@ -220,17 +220,20 @@ class ElevatorLayout(Config):
     v_pref_choices: tuple[float, ...] = (0.5, 0.6, 0.7)  # [m/s]
     robot_start_half_width: float = 0.25  # [m] robot start x ∈ ±this
     robot_start_y: tuple[float, float] | None = (-2.5, -2.1)  # [m] None: compact rule
-    boarder_x: tuple[float, float] | None = (1.2, 1.35)  # [m] |x| of a boarder's start
-    boarder_y: tuple[float, float] | None = (-1.4, -0.75)  # [m] beside the door
+    boarder_x: tuple[float, float] | None = (1.2, 1.3)  # [m] |x| of a boarder's start
+    boarder_y: tuple[float, float] | None = (-3.6, -2.9)  # [m] beside, a step behind the robot
     boarding_delay: tuple[float, float] = (0.5, 1.5)  # [s] boarders' reaction time
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
-    # After the door, the exiting passenger turns aside through these points (HR-RL: toward
-    # the robot's goal side, across its way), then leaves through the open far side below
-    # the last one. None: straight out (compact rule).
-    exit_waypoints: tuple[Point, ...] | None = ((-1.2, -1.9),)  # [m]
+    # After the door, the exiting passenger turns aside through these points (HR-RL: to the
+    # humans' side, ahead of the robot), then leaves through the open far side below the last
+    # one. None: straight out (compact rule).
+    exit_waypoints: tuple[Point, ...] | None = ((1.2, -1.6),)  # [m]
     # Boarders go once the exiting passenger heads for this waypoint index (1 = the one in
     # front of the door, 2 = the first after it, …); None: once it has left the map.
     exit_release_waypoint: int | None = 2
+    # A later boarder goes once the one before it heads for this waypoint index (1 = in front
+    # of the door, 2 = just inside the cabin, 3 = its spot); None: once it has arrived.
+    boarder_release_waypoint: int | None = 1
     boarders_react_to_robot: bool = True  # False: the robot is invisible to the boarders
     exiting_react_to_robot: bool = True  # False: … to the exiting passengers
     margin: float = 0.05  # [m] extra clearance from walls for sampled positions
@@ -247,6 +250,7 @@ class ElevatorLayout(Config):
             boarder_y=None,
             exit_waypoints=None,
             exit_release_waypoint=None,
+            boarder_release_waypoint=None,
             min_start_gap=0.05,
         )
 
@@ -289,16 +293,17 @@ class ElevatorLayout(Config):
             if not isinstance(n, int) or n < 0:
                 raise ScenarioError(expect(f"ElevatorLayout.{name}", "an integer >= 0", n, "fix"))
         n_route = 2 + len(self.exit_waypoints or ())
-        k = self.exit_release_waypoint
-        if k is not None and not (isinstance(k, int) and 1 <= k <= n_route):
-            raise ScenarioError(
-                expect(
-                    "ElevatorLayout.exit_release_waypoint",
-                    f"null or an integer in 1..{n_route} (the exit route's waypoints)",
-                    k,
-                    "fix it",
+        for name, n_max in (("exit_release_waypoint", n_route), ("boarder_release_waypoint", 2)):
+            k = getattr(self, name)
+            if k is not None and not (isinstance(k, int) and 1 <= k <= n_max):
+                raise ScenarioError(
+                    expect(
+                        f"ElevatorLayout.{name}",
+                        f"null or an integer in 1..{n_max} (waypoints of the route)",
+                        k,
+                        "fix it",
+                    )
                 )
-            )
 
 
 def elevator_scenario(
@@ -382,6 +387,7 @@ def elevator_scenario(
                 v_pref_choices=lay.v_pref_choices,
                 start_delay=lay.boarding_delay,
                 wait_for=wait,
+                release_waypoint=lay.boarder_release_waypoint,
                 reacts_to_robot=lay.boarders_react_to_robot,
             )
         )
