@@ -3,8 +3,9 @@
 Positives (γ = +1): every frame of successful episodes of the courteous driver (elevator) or
 the corridor driver (static study). Negatives (γ = −1): the frames in the last 1.0 s before a
 collision of the careless driver (elevator) or of the corridor driver aimed at the human
-(static study). Episodes are seeded ``seed + k``; collection stops at the requested counts
-(the last episode is truncated to hit them exactly).
+(static study). Episodes are seeded ``training_seed(seed, k)``; collection stops at the requested counts
+(the last episode is truncated to hit them exactly). Episode seeds are training seeds
+(:func:`pioneer.seeds.training_seed`), disjoint from the evaluation and validation seeds.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pioneer.control.policy import Policy
 from pioneer.demos.dataset import Dataset
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
 from pioneer.errors import ConfigError, expect
+from pioneer.seeds import training_seed
 from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import get_scenario
 
@@ -103,7 +105,7 @@ def generate(
         for k in range(MAX_EPISODES):
             if got >= want:
                 break
-            ep_seed = seed + offset + k
+            ep_seed = training_seed(seed + offset, k)
             frames, event = record_episode(env, make(k), ep_seed)
             if gamma > 0 and event == "success":
                 n = add(frames, 1.0, ep_seed, want - got)

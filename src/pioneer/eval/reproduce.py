@@ -48,6 +48,7 @@ TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obst
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: the shipped PPO weights)
+CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
 
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
@@ -82,7 +83,7 @@ def reproduce(
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
     policies = [PolicySpec.make(name, reward=reward_tpl) for name in TEACHERS]
-    extra = [PolicySpec.make(name) for name in BASELINES] + list(extra_policies)
+    extra = [PolicySpec.make(name) for name in (*BASELINES, *CLASSIC)] + list(extra_policies)
     students = [PolicySpec.make(name) for name in STUDENTS]
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
     policies += extra + students
@@ -184,12 +185,20 @@ def _figures(out: Path, reward_tpl: str) -> dict[str, str]:
     from pioneer.demos.dataset import Dataset
     from pioneer.eval.episode import run_episode
     from pioneer.reward.study import run_static_study
+    from pioneer.sim.scenarios import get_scenario, sample_state
     from pioneer.viz import plot_trajectory, render_frame, save_gif
 
     figs: dict[str, str] = {}
     study = run_static_study(Dataset.load(shipped_demos("static")), out / "figures")
     figs["static study (paper Fig. 3)"] = "figures/static_study.png"
     for sc in SCENARIOS:
+        scenario = get_scenario(sc)
+        start = sample_state(scenario, np.random.default_rng(episode_seed(sc, 0, 0)))
+        png = out / "figures" / f"{sc}-world.png"
+        plot_trajectory(scenario.world(), [start], png, title=f"{sc} · the world at t = 0")
+        figs[f"{sc} world (initial state of evaluation seed 0, trial 0)"] = (
+            f"figures/{sc}-world.png"
+        )
         teacher = make_teacher(sc, reward=reward_tpl.format(scenario=sc))
         seed = episode_seed(sc, 0, 0)
         rec, tr = run_episode(sc, teacher, seed, record=True)

@@ -219,10 +219,13 @@ class ElevatorLayout(Config):
     human_radius: float = 0.6  # [m] the paper's value
     v_pref_choices: tuple[float, ...] = (0.5, 0.6, 0.7)  # [m/s]
     robot_start_half_width: float = 0.25  # [m] robot start x ∈ ±this
-    robot_start_y: tuple[float, float] | None = (-2.5, -2.1)  # [m] None: compact rule
+    robot_start_y: tuple[float, float] | None = (-2.4, -2.0)  # [m] None: compact rule
     boarder_x: tuple[float, float] | None = (1.2, 1.3)  # [m] |x| of a boarder's start
-    boarder_y: tuple[float, float] | None = (-3.6, -2.9)  # [m] beside, a step behind the robot
+    boarder_y: tuple[float, float] | None = (-3.8, -3.3)  # [m] beside, behind the robot
     boarding_delay: tuple[float, float] = (0.5, 1.5)  # [s] boarders' reaction time
+    # The first boarder starts on the robot's goal side, the next on the humans' side, … (so
+    # HL-RR is the mirror image of HR-RL); False: the first on the right in both (compact).
+    first_boarder_on_goal_side: bool = True
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
     # After the door, the exiting passenger turns aside through these points (HR-RL: to the
     # humans' side, ahead of the robot), then leaves through the open far side below the last
@@ -251,6 +254,7 @@ class ElevatorLayout(Config):
             exit_waypoints=None,
             exit_release_waypoint=None,
             boarder_release_waypoint=None,
+            first_boarder_on_goal_side=False,
             min_start_gap=0.05,
         )
 
@@ -367,7 +371,9 @@ def elevator_scenario(
     n_b = lay.n_boarding
     exiting = tuple(range(n_b, n_b + lay.n_exiting))
     for k in range(n_b):
-        lobby_side = 1.0 if k % 2 == 0 else -1.0
+        lobby_side = (1.0 if k % 2 == 0 else -1.0) * (
+            -side if lay.first_boarder_on_goal_side else 1
+        )
         start = Region(
             x=(x_in, max(x_in, x_out)) if lobby_side > 0 else (-max(x_in, x_out), -x_in),
             y=lobby_y,
@@ -481,6 +487,7 @@ def static_study_scenario(
 
 # --------------------------------------------------------------------------------------------
 # Registry and sampling
+
 
 def _compact(side: str, name: str) -> ScenarioConfig:
     """The earlier default world (reproducible: the same states, bit for bit)."""
