@@ -10,6 +10,7 @@ import pytest
 from pioneer.demos.dataset import Dataset
 from pioneer.demos.generate import NEGATIVE_WINDOW, generate, negative_frames, record_episode
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver
+from pioneer.seeds import TRAINING_BASE
 from pioneer.errors import ConfigError
 from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import get_scenario
@@ -58,8 +59,10 @@ def test_generate_returns_exact_counts(request, fixture, scenario, n_pos, n_neg)
     np.testing.assert_array_equal(d.scenario, 0)
     assert d.meta["source"] == "scripted"
     assert d.meta["negative_window_s"] == NEGATIVE_WINDOW
-    # positives come first, from seeds 0, 1, …; negatives from seeds 100000, …
-    assert np.all(d.seed[d.gamma > 0] < 100_000) and np.all(d.seed[d.gamma < 0] >= 100_000)
+    # positives come first, from training seeds 0, 1, …; negatives from 100000, …
+    k = d.seed - TRAINING_BASE
+    assert np.all(k >= 0)
+    assert np.all(k[d.gamma > 0] < 100_000) and np.all(k[d.gamma < 0] >= 100_000)
     for e in np.unique(d.episode):
         m = d.episode == e
         assert np.unique(d.gamma[m]).size == 1 and np.unique(d.seed[m]).size == 1
@@ -110,7 +113,8 @@ def test_positive_episodes_were_successes(static_demos):
     for e in np.unique(d.episode[d.gamma > 0]):
         m = d.episode == e
         seed = int(d.seed[m][0])
-        frames, event = record_episode(env, CorridorDriver(side=1.0 if seed % 3 else -1.0), seed)
+        k = seed - TRAINING_BASE  # the episode index: 2 of 3 on the right
+        frames, event = record_episode(env, CorridorDriver(side=1.0 if k % 3 else -1.0), seed)
         assert event == "success"
         k = int(m.sum())
         assert k <= len(frames)

@@ -15,6 +15,7 @@ from pioneer.sim import (
     HumanSpec,
     Region,
     ScenarioConfig,
+    SimConfig,
     SocialForceConfig,
     get_scenario,
     sample_state,
@@ -34,7 +35,11 @@ R_HUMAN = 0.6
 
 
 def far_walls_scenario(start_x: float, vpref: float) -> ScenarioConfig:
-    """A 20 × 20 m room, robot standing at the origin, one human walking from y = −4 to 4."""
+    """A 20 × 20 m room, robot standing at the origin, one human walking from y = −4 to 4.
+
+    The human reacts to the robot as to another human (the ``robot-as-human`` preset), so
+    these tests check the social-force avoidance itself, not the paper world's weak reaction.
+    """
     walls = ((-10, -10, 10, -10), (10, -10, 10, 10), (10, 10, -10, 10), (-10, 10, -10, -10))
     return ScenarioConfig(
         name="crossing",
@@ -51,6 +56,7 @@ def far_walls_scenario(start_x: float, vpref: float) -> ScenarioConfig:
                 v_pref_choices=(vpref,),
             ),
         ),
+        sim=SimConfig(social_force=SocialForceConfig.preset("robot-as-human")),
     )
 
 
@@ -269,10 +275,11 @@ def test_elevator_flows_complete_without_robot(name, n_steps, side):
 
 
 def test_social_force_config():
-    assert SocialForceConfig.preset("cvar-bf") == SocialForceConfig()
+    assert SocialForceConfig.preset("paper") == SocialForceConfig()
     crowd = SocialForceConfig.preset("crowdnav")
     assert crowd.b_human == 1.0
     assert crowd.a_human == 2.0
+    assert crowd.a_robot == 0.0  # CrowdNav++: robot.visible = False
     params = SocialForceConfig().as_array()
     assert params.shape == (12,)
     assert params[0] == 0.5  # tau

@@ -31,7 +31,9 @@ ELEVATOR_NAMES = ["hr-rl", "hl-rr", "hr-rl-r03", "hl-rr-r03"]
 
 
 def test_scenario_names():
-    assert scenario_names() == sorted(["hl-rr", "hl-rr-r03", "hr-rl", "hr-rl-r03", "static"])
+    assert scenario_names() == sorted(
+        ["hl-rr", "hl-rr-r03", "hr-rl", "hr-rl-r03", "hr-rl-compact", "hl-rr-compact", "static"]
+    )
     for name in scenario_names():
         assert get_scenario(name).name == name
     assert get_scenario("  HR-RL ").name == "hr-rl"
@@ -47,8 +49,9 @@ def test_unknown_scenario_names_field_and_lists_names():
     assert isinstance(exc.value, ConfigError)  # ScenarioError is a ConfigError
 
 
-def test_default_elevator_geometry_matches_spec():
-    cfg = get_scenario("hr-rl")
+def test_compact_elevator_geometry_matches_spec():
+    """The compact world (SPEC 1.5, the earlier default); the paper world: test_paper_world."""
+    cfg = get_scenario("hr-rl-compact")
     walls = np.asarray(cfg.walls)
     assert cfg.bounds == (-2.0, 2.0, -1.3, 2.7)
     # Door gap x ∈ [−0.9, 0.9] on y = 0; cabin x ∈ [−1.25, 1.25], y ∈ [0, 2.7].
@@ -136,13 +139,18 @@ def test_sampled_state_structure():
     ex = roles.index("exiting")
     boarders = [i for i, r in enumerate(roles) if r == "boarding"]
     assert state.h_status[0].tolist() == [WALKING] * 3
-    # Exiting: behind the door → in front of the door → the far lobby, where it is removed.
-    assert state.h_n_waypoints[0, ex] == 3
-    assert state.h_waypoints[0, ex, -1, 1] < -1.3
+    # Exiting: behind the door → in front of the door → aside → beyond the far lobby side,
+    # where it is removed.
+    assert state.h_n_waypoints[0, ex] == 4
+    assert state.h_waypoints[0, ex, -1, 1] < -4.0
     # Boarders wait for the exiting passenger; the second boarder waits for the first.
     assert state.h_wait_for[0, boarders[0], ex] == 1
     assert state.h_wait_for[0, boarders[1], boarders[0]] == 1
     assert state.h_wait_for[0, ex].sum() == 0
+    # … until the passenger is out of the door (heads for waypoint 2, the point aside) and
+    # the first boarder is in it (heads for waypoint 1, just inside the cabin).
+    assert state.h_release[0].tolist() == [1, 1, 2]
+    assert state.h_reacts[0].all()
     assert np.all((state.h_delay[0, boarders] >= 0.5) & (state.h_delay[0, boarders] <= 1.5))
     np.testing.assert_array_equal(state.h_home, state.h_pos)
     np.testing.assert_array_equal(state.start[0], state.robot[0, :2])
@@ -169,11 +177,15 @@ def test_static_study_scenario():
 @pytest.mark.parametrize(
     "layout",
     [
-        ElevatorLayout(n_boarding=4, n_exiting=2, human_radius=0.3),
-        ElevatorLayout(door_width=1.2, human_radius=0.3),
-        ElevatorLayout(cabin_width=3.0, cabin_depth=3.5, lobby_width=5.0, lobby_depth=2.0),
+        ElevatorLayout.compact().replace(n_boarding=4, n_exiting=2, human_radius=0.3),
+        ElevatorLayout.compact().replace(door_width=1.2, human_radius=0.3),
+        ElevatorLayout.compact().replace(
+            cabin_width=3.0, cabin_depth=3.5, lobby_width=5.0, lobby_depth=2.0
+        ),
         ElevatorLayout(n_boarding=0, n_exiting=0),
         ElevatorLayout(n_boarding=1, boarders_queue=False, human_side="left"),
+        ElevatorLayout(n_boarding=3, boarder_y=(-4.4, -2.7), human_radius=0.5),
+        ElevatorLayout(door_width=1.4, lobby_width=5.0, cabin_width=3.0),
     ],
 )
 def test_layout_variants_are_configuration(layout):
