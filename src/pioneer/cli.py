@@ -299,7 +299,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from pioneer.eval.calibration import BANDS, calibrate
 
-    res = calibrate(args.scenario, args.episodes, args.out, args.workers)
+    res = calibrate(args.scenario, args.episodes, args.out, args.workers, driver=args.driver)
     for name, st in res["scenarios"].items():
         cells = []
         for key in (*BANDS, "teacher_risky_frame_share_gap", "risky_at_start_share"):
@@ -459,6 +459,9 @@ def _parser() -> argparse.ArgumentParser:
     cal.add_argument("--episodes", type=int, default=100, help="validation episodes per scenario")
     cal.add_argument("--out", required=True, help="folder for calibration.json")
     cal.add_argument("--workers", type=int, help="processes (default: all cores)")
+    cal.add_argument(
+        "--driver", default="teacher", help="policy behind the teacher_* statistics (teacher)"
+    )
     cal.set_defaults(func=_cmd_calibrate)
 
     d = sub.add_parser("distill", help="DAgger: distil the teacher into a LiDAR-only student")

@@ -10,8 +10,8 @@ import pytest
 from pioneer.demos.dataset import Dataset
 from pioneer.demos.generate import NEGATIVE_WINDOW, generate, negative_frames, record_episode
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver
-from pioneer.seeds import TRAINING_BASE
 from pioneer.errors import ConfigError
+from pioneer.seeds import TRAINING_BASE
 from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import get_scenario
 

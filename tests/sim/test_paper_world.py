@@ -62,8 +62,10 @@ def test_the_per_human_flag(reacts):
     """A human flagged not to react walks through the robot's place as if it were absent."""
     human = {"pos": (0.0, -1.5), "waypoints": [], "goal": (0.0, 2.0), "reacts": reacts}
     state = make_state(robot=(0.0, 0.0, 0.0), goal=(5.0, 5.0), humans=[human])
-    world = get_scenario("static").world().__class__(
-        walls=np.zeros((0, 4)), bounds=np.array([-9.0, 9.0, -9.0, 9.0])
+    world = (
+        get_scenario("static")
+        .world()
+        .__class__(walls=np.zeros((0, 4)), bounds=np.array([-9.0, 9.0, -9.0, 9.0]))
     )
     away = state.copy()
     away.robot[0, :2] = 1e3

@@ -3,9 +3,9 @@
 Positives (γ = +1): every frame of successful episodes of the courteous driver (elevator) or
 the corridor driver (static study). Negatives (γ = −1): the frames in the last 1.0 s before a
 collision of the careless driver (elevator) or of the corridor driver aimed at the human
-(static study). Episodes are seeded ``training_seed(seed, k)``; collection stops at the requested counts
-(the last episode is truncated to hit them exactly). Episode seeds are training seeds
-(:func:`pioneer.seeds.training_seed`), disjoint from the evaluation and validation seeds.
+(static study). Episodes are seeded ``training_seed(seed, k)`` (training seeds, disjoint from
+the evaluation and validation seeds of :mod:`pioneer.seeds`); collection stops at the
+requested counts (the last episode is truncated to hit them exactly).
 """
 
 from __future__ import annotations

@@ -99,17 +99,19 @@ def _humans_alone(world: Any, state0: Any, time_limit: float) -> tuple[bool, lis
     return False, states
 
 
-def episode_statistics(task: tuple[str, int]) -> dict[str, Any]:
-    """The three runs of one validation episode (a picklable task for the worker pool)."""
-    from pioneer.control.teacher import make_teacher
+def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
+    """The three runs of one validation episode (a picklable task for the worker pool):
+    ``(scenario, seed, driver)``, the driver a policy name (``teacher`` by default)."""
+    import pioneer.control  # noqa: F401  (registers the policies)
+    from pioneer.control.policy import build_policy
     from pioneer.demos.scripted import CarelessDriver
     from pioneer.sim.env import NavEnv
     from pioneer.sim.humans import GONE
 
-    scenario, seed = task
+    scenario, seed, driver = task
     env = NavEnv(scenario)
-    # 1. teacher
-    teacher = make_teacher(scenario)
+    # 1. teacher (or another driver)
+    teacher = build_policy(driver, scenario)
     obs, info = env.reset(seed=seed)
     teacher.reset(info, np.random.default_rng(seed))
     state0 = env.state
@@ -186,7 +188,9 @@ def summarize_world(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return stats
 
 
-def _run(tasks: list[tuple[str, int]], workers: int, progress: bool) -> Iterator[dict[str, Any]]:
+def _run(
+    tasks: list[tuple[str, int, str]], workers: int, progress: bool
+) -> Iterator[dict[str, Any]]:
     bar = tqdm(total=len(tasks), desc="calibrate", unit="episode", disable=not progress)
     if workers <= 1:
         for t in tasks:
@@ -209,21 +213,29 @@ def calibrate(
     out_dir: str | Path | None = None,
     workers: int | None = None,
     progress: bool = True,
+    driver: str = "teacher",
 ) -> dict[str, Any]:
     """Measure the world statistics of ``scenarios`` on ``episodes`` validation seeds each;
-    write ``out_dir/calibration.json`` (and per-episode rows) if given."""
+    write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
+    policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
+    import pioneer.control  # noqa: F401  (registers the policies)
+    from pioneer.control.policy import policy_factory
     from pioneer.sim.scenarios import get_scenario
 
     if episodes < 1:
         raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
     names = [get_scenario(s).name for s in scenarios]  # unknown names fail here, at once
-    tasks = [(s, validation_seed("calibrate", s, k)) for s in names for k in range(episodes)]
+    policy_factory(driver)  # an unknown driver fails here, at once
+    tasks = [
+        (s, validation_seed("calibrate", s, k), driver) for s in names for k in range(episodes)
+    ]
     n_workers = workers if workers is not None else min(len(tasks), _cpu_count())
     t0 = time.perf_counter()
     rows = sorted(_run(tasks, n_workers, progress), key=lambda r: (r["scenario"], r["seed"]))
     result: dict[str, Any] = {
         "format": "pioneer.calibration/1",
         "seeds": "validation (pioneer.seeds.validation_seed('calibrate', scenario, k))",
+        "driver": driver,
         "risky_clearance_m": RISKY_CLEARANCE,
         "bands": {k: list(v) for k, v in BANDS.items()},
         "paper": {s: PAPER[s] for s in names if s in PAPER},

@@ -48,8 +48,8 @@ from pioneer.errors import ConfigError, expect
 from pioneer.sim.geometry import closest_point_on_segment, norm2d, wall_offsets
 
 __all__ = [
-    "A_ROBOT_WEAK",
     "ARRIVED",
+    "A_ROBOT_WEAK",
     "GONE",
     "PRESETS",
     "WALKING",
