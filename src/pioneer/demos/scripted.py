@@ -1,11 +1,11 @@
 """Scripted demonstrators: reproducible demonstrations with no human at the keyboard (SPEC 2).
 
 - ``CourteousDriver`` (γ = +1): waits aside until every exiting passenger is out of the door
-  and past the robot's row, then a privileged lookahead over the rule terms that never lets
-  its predicted clearance to anyone drop below 0.2 m. Aside: a spot beside its start, on the
-  side away from the passenger's exit (privileged: the passenger's route), reached at a walk.
-  In the compact world (1.3 m lobby) there is no such room (docs/demonstrations.md); there it
-  only keeps its distance.
+  and has turned aside, then a privileged lookahead over the rule terms that never lets its
+  predicted clearance to anyone drop below 0.2 m. Aside: a spot beside its start, on the side
+  away from the passenger's exit (privileged: the passenger's route), reached at a walk. In
+  the compact world (1.3 m lobby, passengers leave straight out) there is no such room
+  (docs/demonstrations.md); there it only keeps its distance.
 - ``CarelessDriver`` (γ = −1 near collisions): drives straight at the goal, ignoring people;
   speed and steering gain vary with the seed. Only the frames in the last 1.0 s before a
   collision are kept, labelled γ = −1.
@@ -53,7 +53,9 @@ class CourteousDriver(LookaheadTeacher):
         world = info["world"]
         leaving = _leaving(st, world.bounds)
         self._spot = None
-        if leaving.any():
+        # Only where the passenger turns aside after the door (a route of more than behind →
+        # front → away) is there room to wait aside; in the compact world there is none.
+        if leaving.any() and np.all(st.h_n_waypoints[0, leaving] > 3):
             # The passengers' exit side: where their routes end (the mean final goal's x).
             last = st.h_n_waypoints[0, leaving] - 1
             exit_x = float(np.mean(st.h_waypoints[0, leaving, last, 0]))
