@@ -227,6 +227,8 @@ class ElevatorLayout(Config):
     # HL-RR is the mirror image of HR-RL); False: the first on the right in both (compact).
     first_boarder_on_goal_side: bool = True
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
+    exit_start_x: tuple[float, float] = (-0.5, 0.5)  # [m] exiting passengers start in the cabin
+    exit_start_y: tuple[float, float] | None = None  # [m] None: r_h + 0.3 … r_h + 0.9 (≤ depth)
     # After the door, the exiting passenger turns aside through these points (HR-RL: to the
     # humans' side, ahead of the robot), then leaves through the open far side below the last
     # one. None: straight out (compact rule).
@@ -266,7 +268,7 @@ class ElevatorLayout(Config):
         check_nonnegative("ElevatorLayout", "min_start_gap", self.min_start_gap)
         check_nonnegative("ElevatorLayout", "robot_start_half_width", self.robot_start_half_width)
         check_range("ElevatorLayout", "boarding_delay", *self.boarding_delay)
-        for name in ("robot_start_y", "boarder_x", "boarder_y"):
+        for name in ("robot_start_y", "boarder_x", "boarder_y", "exit_start_x", "exit_start_y"):
             value = getattr(self, name)
             if value is not None:
                 check_range("ElevatorLayout", name, *value)
@@ -399,11 +401,12 @@ def elevator_scenario(
         )
     aside = tuple((side * x, y) for x, y in lay.exit_waypoints or ())  # HR-RL coordinates
     exit_x = (aside[-1][0], aside[-1][0]) if aside else (-0.3, 0.3)
+    exit_y = lay.exit_start_y or (r_h + 0.3, min(r_h + 0.9, depth - r_h - m))
     for _ in range(lay.n_exiting):
         humans.append(
             HumanSpec(
                 role="exiting",
-                start=Region(x=(-0.5, 0.5), y=(r_h + 0.3, min(r_h + 0.9, depth - r_h - m))),
+                start=Region(x=lay.exit_start_x, y=exit_y),
                 goal=Region(x=exit_x, y=(-ld - 1.5, -ld - 1.5)),
                 waypoints=(behind, front, *aside),
                 radius=r_h,
