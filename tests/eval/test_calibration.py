@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -39,11 +40,11 @@ def test_path_distance_matches_a_dense_sampling_oracle(points, path):
     got = _path_distance(p, q)
     # Oracle: the polyline sampled densely (an upper bound within the sampling step).
     dense = [q[0]]
-    for a, b in zip(q[:-1], q[1:], strict=True):
+    for a, b in itertools.pairwise(q):
         dense.extend(a + np.linspace(0.0, 1.0, 2001)[1:, None] * (b - a))
     dense_arr = np.array(dense)
     oracle = np.linalg.norm(p[:, None] - dense_arr[None], axis=2).min(axis=1)
-    step = max((np.linalg.norm(b - a) for a, b in zip(q[:-1], q[1:], strict=True)), default=0)
+    step = max((np.linalg.norm(b - a) for a, b in itertools.pairwise(q)), default=0)
     assert np.all(got <= oracle + 1e-9)
     assert np.all(oracle - got <= step / 2000 + 1e-9)
 

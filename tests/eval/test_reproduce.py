@@ -9,7 +9,7 @@ import pytest
 
 from pioneer.cli import main
 from pioneer.eval.harness import read_records
-from pioneer.eval.reproduce import BASELINES, SCENARIOS, SHIELD, STUDENTS, TEACHERS
+from pioneer.eval.reproduce import BASELINES, CLASSIC, SCENARIOS, SHIELD, STUDENTS, TEACHERS
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +22,8 @@ def smoke(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_every_row_is_evaluated_once(smoke: Path) -> None:
     recs = read_records(smoke / "eval" / "episodes.jsonl")
     rows = {(r["scenario"], r["policy"]) for r in recs}
-    expected = {(sc, p) for sc in SCENARIOS for p in (*TEACHERS, *BASELINES, *STUDENTS, SHIELD)}
+    rows_i = (*TEACHERS, *BASELINES, *CLASSIC, *STUDENTS, SHIELD)
+    expected = {(sc, p) for sc in SCENARIOS for p in rows_i}
     assert rows == expected
     assert len(recs) == len(expected)  # 1 seed × 1 trial each
     students = [r for r in recs if r["policy"] in (*STUDENTS, SHIELD)]

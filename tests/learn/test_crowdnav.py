@@ -367,10 +367,10 @@ def test_train_cli_refuses_other_settings_on_resume(tmp_path, capsys):
 def teacher_episode():
     from pioneer.control.teacher import make_teacher
 
-    sc = get_scenario("hr-rl")
+    sc = get_scenario("hr-rl-compact")  # a world where this teacher episode succeeds
     world = sc.world()
     cfg = CrowdNavConfig(max_humans=3)
-    data = collect_episodes(sc, world, make_teacher("hr-rl"), [123], cfg)
+    data = collect_episodes(sc, world, make_teacher("hr-rl-compact"), [123], cfg)
     return sc, world, cfg, data
 
 

@@ -261,8 +261,9 @@ class SocialForceRobotPolicy:
     (speed capped at v_max) becomes a unicycle command by heading control:
     φ = wrap(angle(v_d) − θ), ω = clip(k_ω φ, ±ω_max), v = ‖v_d‖ max(0, cos φ).
 
-    Parameters left ``None`` take the world's social-force preset (A = a_robot, B = b_robot for
-    humans; a_wall for walls; τ), so the robot obeys the same model as the people. One
+    Parameters left ``None`` take the world's social-force preset (A = a_human, B = b_human for
+    humans — how people avoid each other, not how they react to the robot; a_wall for walls;
+    τ), so the robot obeys the same model as the people. One
     exception: the wall range defaults to B_w = 0.5 m (the preset's B) rather than the humans'
     0.2 m, because simulated humans also have hard walls (projection) and the robot does not —
     with 0.2 m the robot grazed a door jamb or cabin wall in about half of the elevator
@@ -301,8 +302,8 @@ class SocialForceRobotPolicy:
         """The social force on the robot ``(2,)`` [m/s²]."""
         sf = world.sim.social_force
         tau = self.tau if self.tau is not None else sf.tau
-        a_h = self.a_human if self.a_human is not None else sf.a_robot
-        b_h = self.b_human if self.b_human is not None else sf.b_robot
+        a_h = self.a_human if self.a_human is not None else sf.a_human
+        b_h = self.b_human if self.b_human is not None else sf.b_human
         a_w = self.a_wall if self.a_wall is not None else sf.a_wall
         b_w = self.b_wall if self.b_wall is not None else sf.b_wall
         r_r = world.sim.robot.radius
