@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -53,10 +54,17 @@ BANDS: dict[str, tuple[float, float]] = {
     "humans_alone_done_share": (0.99, 1.0),
     "careless_collision_share": (0.30, 1.0),
 }
-PAPER = {
-    "hr-rl": {"teacher_path_length_m": 3.74, "teacher_time_s": 12.24, "risky_share": 0.081},
-    "hl-rr": {"teacher_path_length_m": 3.88, "teacher_time_s": 12.94, "risky_share": 0.046},
-}
+
+
+def _paper(scenario: str) -> dict[str, float]:
+    """The paper's teacher PL and TT (Table I) and risky frame share (§V-B.2) of ``scenario``."""
+    from pioneer.eval.tables import PAPER as TABLES
+    from pioneer.eval.uncertainty import PAPER_TABLE_IV
+
+    _, tt, pl = TABLES[("I", scenario, "teacher")]
+    iv = PAPER_TABLE_IV[scenario]
+    share = iv["frames_risky"] / (iv["frames_risky"] + iv["frames_safe"])
+    return {"teacher_path_length_m": pl, "teacher_time_s": tt, "risky_share": share}
 
 
 def _surface_distance(state: Any) -> float:
@@ -105,35 +113,24 @@ def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     import pioneer.control  # noqa: F401  (registers the policies)
     from pioneer.control.policy import build_policy
     from pioneer.demos.scripted import CarelessDriver
-    from pioneer.sim.env import NavEnv
+    from pioneer.eval.episode import run_episode
     from pioneer.sim.humans import GONE
+    from pioneer.sim.scenarios import get_scenario
 
     scenario, seed, driver = task
-    env = NavEnv(scenario)
+    cfg = get_scenario(scenario)
     # 1. teacher (or another driver)
-    teacher = build_policy(driver, scenario)
-    obs, info = env.reset(seed=seed)
-    teacher.reset(info, np.random.default_rng(seed))
-    state0 = env.state
-    states = [state0]
-    event = None
-    while event is None:
-        obs, _, _, _, info = env.step(teacher.act(obs, info))
-        states.append(env.state)
-        event = info["event"]
+    rec, traj = run_episode(cfg, build_policy(driver, scenario), seed, record=True)
+    assert traj is not None
+    states = traj.states
+    state0 = states[0]
     decision = states[:-1]  # the state each command was chosen in
     surf = np.array([_surface_distance(s) for s in decision])
-    r_r = env.scenario.sim.robot.radius
+    r_r = cfg.sim.robot.radius
     # 2. careless driver, same seed
-    careless = CarelessDriver()
-    obs, info = env.reset(seed=seed)
-    careless.reset(info, np.random.default_rng(seed))
-    c_event = None
-    while c_event is None:
-        obs, _, _, _, info = env.step(careless.act(obs, info))
-        c_event = info["event"]
+    c_event = run_episode(cfg, CarelessDriver(), seed)[0].event
     # 3. humans alone, same initial state
-    done, alone = _humans_alone(env.world, state0, env.scenario.sim.time_limit)
+    done, alone = _humans_alone(traj.world, state0, cfg.sim.time_limit)
     deflection = 0.0
     for i in range(state0.n_humans):
         ref = np.array([s.h_pos[0, i] for s in alone if s.h_status[0, i] != GONE])
@@ -143,7 +140,7 @@ def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     return {
         "scenario": scenario,
         "seed": seed,
-        "teacher_event": event,
+        "teacher_event": rec.event,
         "teacher_time_s": float(states[-1].t[0]),
         "teacher_path_length_m": float(states[-1].path_length[0]),
         "risky_frames": int(np.sum(surf <= RISKY_CLEARANCE)),
@@ -220,7 +217,7 @@ def calibrate(
     policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
     import pioneer.control  # noqa: F401  (registers the policies)
     from pioneer.control.policy import policy_factory
-    from pioneer.sim.scenarios import get_scenario
+    from pioneer.sim.scenarios import get_scenario, pin_scenario
 
     if episodes < 1:
         raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
@@ -229,7 +226,7 @@ def calibrate(
     tasks = [
         (s, validation_seed("calibrate", s, k), driver) for s in names for k in range(episodes)
     ]
-    n_workers = workers if workers is not None else min(len(tasks), _cpu_count())
+    n_workers = workers if workers is not None else min(len(tasks), os.cpu_count() or 1)
     t0 = time.perf_counter()
     rows = sorted(_run(tasks, n_workers, progress), key=lambda r: (r["scenario"], r["seed"]))
     result: dict[str, Any] = {
@@ -238,14 +235,13 @@ def calibrate(
         "driver": driver,
         "risky_clearance_m": RISKY_CLEARANCE,
         "bands": {k: list(v) for k, v in BANDS.items()},
-        "paper": {s: PAPER[s] for s in names if s in PAPER},
+        "paper": {s: _paper(s) for s in names if s in ("hr-rl", "hl-rr")},
         "scenarios": {},
     }
     for s in names:
-        cfg = get_scenario(s)
         result["scenarios"][s] = {
             **summarize_world([r for r in rows if r["scenario"] == s]),
-            "definition": json.loads(json.dumps(cfg.to_dict())),
+            "definition": pin_scenario(s, None, "calibrate"),
         }
     result["elapsed_s"] = time.perf_counter() - t0
     if out_dir is not None:
@@ -254,9 +250,3 @@ def calibrate(
         write_text_atomic(out / "calibration.json", json.dumps(result, indent=2))
         write_text_atomic(out / "episodes.jsonl", "".join(json.dumps(r) + "\n" for r in rows))
     return result
-
-
-def _cpu_count() -> int:
-    import os
-
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
