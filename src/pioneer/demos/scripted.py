@@ -59,7 +59,7 @@ class CourteousDriver(LookaheadTeacher):
             # The passengers' exit side: where their routes end (the mean final goal's x).
             last = st.h_n_waypoints[0, leaving] - 1
             exit_x = float(np.mean(st.h_waypoints[0, leaving, last, 0]))
-            lobby_x = float(world.bounds[1]) - st.h_radius[0].max()
+            lobby_x = float(world.bounds[1]) - world.sim.robot.radius
             spot_x = float(
                 np.clip(st.robot[0, 0] - np.sign(exit_x) * self.aside, -lobby_x, lobby_x)
             )
