@@ -56,6 +56,7 @@ import numba
 import numpy as np
 
 import pioneer
+from pioneer.envs.env import NavEnv
 from pioneer.sim import (
     ElevatorLayout,
     State,
@@ -67,7 +68,6 @@ from pioneer.sim import (
     scan,
     step,
 )
-from pioneer.sim.env import NavEnv
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -748,13 +748,19 @@ def bench_teacher_decision(plan: Plan) -> dict[str, Any]:
     """One teacher decision (120 candidates × 10 states: world step, rays, density, scoring),
     and the same pieces alone, to show where the time goes."""
     from pioneer.control.rollout import rollout
-    from pioneer.control.teacher import make_teacher, rollout_features
+    from pioneer.control.teacher import make_teacher
+    from pioneer.reward.features import feature_map
 
     _, world, state = elevator_setup(SEED + 30)
     teacher = make_teacher("hr-rl")
     teacher.decide(world, state)
     ro = rollout(world, state, teacher.candidates)
-    feats = rollout_features("obs_action", ro)
+    c, n_l = ro.robot.shape[:2]
+    feats = feature_map("obs_action").from_arrays(
+        ro.robot[:, :, :2].reshape(c * n_l, 2),
+        ro.obs.reshape(c * n_l, -1),
+        np.repeat(ro.commands, n_l, axis=0),
+    )
     assert teacher.density is not None
     density = teacher.density
     cases = {
@@ -784,7 +790,7 @@ def episode_decision_times(
 ) -> np.ndarray:
     """Seconds per ``policy.act`` over the states of ``episodes`` seeded HR-RL episodes;
     ``policy_for(ep)`` gives the policy of episode ``ep``, ``warmup`` untimed calls first."""
-    from pioneer.sim.env import NavEnv
+    from pioneer.envs.env import NavEnv
 
     env = NavEnv("hr-rl")
     times: list[float] = []
@@ -808,7 +814,7 @@ def episode_decision_times(
 def bench_cvar_bf_decision(plan: Plan) -> dict[str, Any]:
     """CVaR-BF decision time over the states of seeded HR-RL episodes (as the original paper
     reports its solver time), next to the teacher's."""
-    from pioneer.control.policy import build_policy
+    from pioneer.control.registry import build_policy
 
     secs = episode_decision_times(
         lambda _: build_policy("cvar-bf", "hr-rl"), plan.cvar_episodes, SEED + 40
@@ -1020,7 +1026,7 @@ def bench_crowdnav_decision(plan: Plan) -> dict[str, Any]:
     """CrowdNav++ ``policy.act`` (graph observation from the privileged state, attention, GRU
     step, increments → command) over the states of seeded HR-RL episodes, shipped weights,
     one torch thread."""
-    from pioneer.control.policy import build_policy
+    from pioneer.control.registry import build_policy
 
     policy = build_policy("crowdnav++", "hr-rl")  # sets torch to 1 thread
     # the same episode count as CVaR-BF's benchmark
@@ -1039,8 +1045,8 @@ def bench_crowdnav_train_throughput(plan: Plan) -> dict[str, Any]:
     thread), per update after a warm-up one, with 16 (the original's), 32 and 64 environments."""
     import torch
 
-    from pioneer.learn.crowdnav import CrowdNavConfig
-    from pioneer.learn.ppo import PPOConfig, RewardConfig, _Trainer
+    from pioneer.baselines.crowdnav.network import CrowdNavConfig
+    from pioneer.baselines.crowdnav.ppo import PPOConfig, RewardConfig, _Trainer
 
     torch.set_num_threads(1)
     metrics: dict[str, Any] = {}

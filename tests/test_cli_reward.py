@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from pioneer.cli import main
-from pioneer.demos.dataset import Dataset
+from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityReward
 
 

@@ -9,6 +9,7 @@ import math
 import pytest
 
 from pioneer.config import Config, check_nonnegative, check_positive, check_range
+from pioneer.envs.env import RewardConfig
 from pioneer.errors import (
     CommandError,
     ConfigError,
@@ -18,7 +19,6 @@ from pioneer.errors import (
     expect,
 )
 from pioneer.sim import ElevatorLayout, LidarConfig, RobotConfig, SimConfig, SocialForceConfig
-from pioneer.sim.env import RewardConfig
 from pioneer_testutils import assert_house_message
 
 

@@ -20,8 +20,7 @@ __all__ = ["main"]
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    import pioneer.control  # noqa: F401  (registers the policies)
-    from pioneer.control.policy import build_policy
+    from pioneer.control.registry import build_policy
     from pioneer.eval.episode import run_episode
     from pioneer.sim.scenarios import get_scenario
     from pioneer.sim.world import scan
@@ -77,7 +76,7 @@ def _cmd_demos_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_demos_show(args: argparse.Namespace) -> int:
-    from pioneer.demos.dataset import Dataset
+    from pioneer.reward.dataset import Dataset
 
     d = Dataset.load(args.demos)
     meta = {k: v for k, v in d.meta.items() if k not in ("feature_names", "units")}
@@ -97,8 +96,9 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
 
 
 def _cmd_reward_fit(args: argparse.Namespace) -> int:
-    from pioneer.demos.dataset import Dataset, default_feature_map, feature_map
+    from pioneer.reward.dataset import Dataset
     from pioneer.reward.density import DensityConfig, DensityReward
+    from pioneer.reward.features import default_feature_map, feature_map
     from pioneer.reward.select import select_length_scale
 
     d = Dataset.load(args.demos)
@@ -139,8 +139,9 @@ def _cmd_reward_fit(args: argparse.Namespace) -> int:
 def _cmd_reward_show(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from pioneer.demos.dataset import Dataset, default_feature_map, feature_map
+    from pioneer.reward.dataset import Dataset
     from pioneer.reward.density import DensityReward
+    from pioneer.reward.features import default_feature_map, feature_map
     from pioneer.stats import auroc
 
     m = DensityReward.load(args.model)
@@ -172,8 +173,8 @@ def _cmd_reward_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_study_static(args: argparse.Namespace) -> int:
-    from pioneer.demos.dataset import Dataset
-    from pioneer.reward.study import run_static_study
+    from pioneer.experiments.static_study import run_static_study
+    from pioneer.reward.dataset import Dataset
 
     summary = run_static_study(Dataset.load(args.demos), args.out)
     print(json.dumps(summary, indent=2))
@@ -197,15 +198,13 @@ def _add_ablation_flags(p: argparse.ArgumentParser) -> None:
 def _policy_spec(text: str) -> PolicySpec:
     """``--policy NAME[:key=value,…]`` → a checked spec (parameters against the factory; a
     ``checkpoint``/``model``/``reward``/``weights`` path made absolute for every worker)."""
-    from pioneer.control.policy import check_policy_kwargs, check_policy_name
+    from pioneer.control.registry import check_policy_kwargs, check_policy_name
     from pioneer.eval.harness import PolicySpec
 
     spec = PolicySpec.parse(text)
     check_policy_name(spec.name)
     kwargs = dict(spec.kwargs)
     if kwargs:
-        import pioneer.control  # noqa: F401  (registers the controllers)
-
         check_policy_kwargs(spec.name, kwargs)
         for key in ("checkpoint", "model", "reward", "weights"):
             if isinstance(kwargs.get(key), str) and "{" not in kwargs[key]:
@@ -290,14 +289,14 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from pioneer.eval.reproduce import reproduce
+    from pioneer.experiments.reproduce import reproduce
 
     print(json.dumps(reproduce(args.profile, args.out, args.workers), indent=2))
     return 0
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from pioneer.eval.calibration import BANDS, calibrate
+    from pioneer.experiments.calibration import BANDS, calibrate
 
     res = calibrate(args.scenario, args.episodes, args.out, args.workers, driver=args.driver)
     for name, st in res["scenarios"].items():
@@ -360,8 +359,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_train_crowdnav(args: argparse.Namespace) -> int:
-    from pioneer.learn.crowdnav_bc import WarmStartConfig
-    from pioneer.learn.ppo import PPOConfig, train_crowdnav
+    from pioneer.baselines.crowdnav.imitation import WarmStartConfig
+    from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 
     ppo = PPOConfig(
         total_steps=args.steps,

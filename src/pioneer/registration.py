@@ -22,4 +22,6 @@ def register_envs() -> None:
     """Register the PioneeR environment ids with Gymnasium (idempotent)."""
     for env_id, name in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="pioneer.sim.env:NavEnv", kwargs={"scenario": name})
+            gym.register(
+                id=env_id, entry_point="pioneer.envs.env:NavEnv", kwargs={"scenario": name}
+            )

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import pioneer_testutils as tu
-from pioneer.control.classic import DWAPolicy, SocialForceRobotPolicy
-from pioneer.control.policy import build_policy, policy_names
+from pioneer.baselines.classic import DWAPolicy, SocialForceRobotPolicy
+from pioneer.control.registry import build_policy, policy_names
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
 from pioneer.sim.humans import ARRIVED

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pioneer_testutils as tu
-from pioneer.control.cvar_bf import (
+from pioneer.baselines.cvar_bf import (
     BETAS,
     CvarBfConfig,
     CvarBfPolicy,
@@ -20,10 +20,10 @@ from pioneer.control.cvar_bf import (
     select_beta,
     wall_barrier,
 )
-from pioneer.control.policy import build_policy, policy_names
+from pioneer.control.registry import build_policy, policy_names
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
-from pioneer.sim.env import NavEnv
 from pioneer.sim.humans import ARRIVED
 
 GAMMA = 0.1

@@ -9,18 +9,14 @@ import math
 import numpy as np
 import pytest
 
-from pioneer.control.policy import build_policy, policy_names
+from pioneer.control.registry import build_policy, policy_names
 from pioneer.control.rollout import rollout
-from pioneer.control.teacher import (
-    LookaheadTeacher,
-    TeacherConfig,
-    default_reward,
-    make_teacher,
-)
+from pioneer.control.teacher import LookaheadTeacher, TeacherConfig, make_teacher
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
+from pioneer.reward.default import default_reward
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
-from pioneer.sim.env import NavEnv
 from pioneer.sim.humans import ARRIVED, SocialForceConfig
 from pioneer.sim.scenarios import HumanSpec, Region, ScenarioConfig, get_scenario
 from pioneer.sim.world import SimConfig

@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pioneer.control.teacher import LookaheadTeacher, default_reward
+from pioneer.control.teacher import LookaheadTeacher
+from pioneer.reward.default import default_reward
 from pioneer.sim import get_scenario, sample_state, step
 
 if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:

@@ -14,8 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pioneer_testutils as tu
-from pioneer.demos.dataset import FORMAT, Dataset, feature_map
 from pioneer.errors import DataError
+from pioneer.reward.dataset import FORMAT, Dataset
+from pioneer.reward.features import feature_map
 from pioneer.sim.lidar import observation_names
 
 COLUMNS = ("episode", "step", "time", "obs", "action", "gamma", "pose", "scenario", "seed")

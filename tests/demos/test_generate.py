@@ -7,12 +7,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pioneer.demos.dataset import Dataset
 from pioneer.demos.generate import NEGATIVE_WINDOW, generate, negative_frames, record_episode
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
+from pioneer.reward.dataset import Dataset
 from pioneer.seeds import TRAINING_BASE
-from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import get_scenario
 
 COLUMNS = ("episode", "step", "time", "obs", "action", "gamma", "pose", "scenario", "seed")

@@ -17,7 +17,6 @@ import pytest
 from PIL import Image
 
 from pioneer.cli import main
-from pioneer.demos.dataset import Dataset
 from pioneer.demos.generate import NEGATIVE_WINDOW, negative_frames
 from pioneer.demos.teleop import (
     TeleopController,
@@ -26,6 +25,7 @@ from pioneer.demos.teleop import (
     label_episode,
 )
 from pioneer.errors import ConfigError, DataError, PioneerError
+from pioneer.reward.dataset import Dataset
 
 DT = 0.1
 OMEGA_MAX = 0.4 * math.pi

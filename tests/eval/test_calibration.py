@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pioneer.cli import main
-from pioneer.eval.calibration import BANDS, _humans_alone, _path_distance, calibrate
 from pioneer.eval.harness import episode_seed
+from pioneer.experiments.calibration import BANDS, _humans_alone, _path_distance, calibrate
 from pioneer.seeds import TRAINING_BASE, VALIDATION_BASE, training_seed, validation_seed
 from pioneer.sim import get_scenario, sample_state
 

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pioneer.control.policy import build_policy
+from pioneer.control.registry import build_policy
 from pioneer.control.teacher import make_teacher
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import (
@@ -27,7 +28,6 @@ from pioneer.eval.harness import (
     read_records,
     run_task,
 )
-from pioneer.sim.env import NavEnv
 from pioneer_testutils import assert_house_message
 
 TIMING = ("wall_time_s", "decision_ms")

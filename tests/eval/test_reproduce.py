@@ -9,7 +9,7 @@ import pytest
 
 from pioneer.cli import main
 from pioneer.eval.harness import read_records
-from pioneer.eval.reproduce import BASELINES, CLASSIC, SCENARIOS, SHIELD, STUDENTS, TEACHERS
+from pioneer.experiments.reproduce import BASELINES, CLASSIC, SCENARIOS, SHIELD, STUDENTS, TEACHERS
 
 
 @pytest.fixture(scope="module")

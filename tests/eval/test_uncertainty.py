@@ -16,14 +16,14 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pioneer.control.classic import GoalPolicy
+from pioneer.baselines.classic import GoalPolicy
+from pioneer.envs.env import NavEnv
 from pioneer.errors import DataError
 from pioneer.eval.episode import EpisodeRecord, run_episode
 from pioneer.eval.harness import EPISODES_FILE, PolicySpec, episode_seed, evaluate, read_records
 from pioneer.eval.metrics import summarize
 from pioneer.eval.uncertainty import PAPER_TABLE_IV, frame_arrays, safe_risky, table_iv_markdown
 from pioneer.learn import MDN, StudentPolicy, make_student_policy, save_student
-from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import static_study_scenario
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message

@@ -14,25 +14,8 @@ import numpy as np
 import pytest
 import torch
 
-from pioneer.cli import main
-from pioneer.control.policy import build_policy
-from pioneer.errors import ConfigError, DataError
-from pioneer.eval.episode import run_episode
-from pioneer.eval.harness import PolicySpec, evaluate
-from pioneer.learn import crowdnav_bc
-from pioneer.learn.crowdnav import (
-    CHECKPOINT_FORMAT,
-    CrowdNavConfig,
-    CrowdNavNet,
-    CrowdNavPolicy,
-    build_observation,
-    command_from_action,
-    load_crowdnav,
-    read_crowdnav_meta,
-    save_crowdnav,
-    shipped_weights,
-)
-from pioneer.learn.crowdnav_bc import (
+from pioneer.baselines.crowdnav import imitation as crowdnav_bc
+from pioneer.baselines.crowdnav.imitation import (
     WarmStartConfig,
     action_from_command,
     bc_loss,
@@ -41,7 +24,23 @@ from pioneer.learn.crowdnav_bc import (
     save_bc_data,
     train_bc,
 )
-from pioneer.learn.ppo import PPOConfig, RewardConfig, compute_gae, crowdnav_reward
+from pioneer.baselines.crowdnav.network import (
+    CHECKPOINT_FORMAT,
+    CrowdNavConfig,
+    CrowdNavNet,
+    load_crowdnav,
+    read_crowdnav_meta,
+    save_crowdnav,
+)
+from pioneer.baselines.crowdnav.observation import build_observation, command_from_action
+from pioneer.baselines.crowdnav.policy import CrowdNavPolicy
+from pioneer.baselines.crowdnav.ppo import PPOConfig, RewardConfig, compute_gae, crowdnav_reward
+from pioneer.cli import main
+from pioneer.control.registry import build_policy
+from pioneer.data import shipped_crowdnav_weights as shipped_weights
+from pioneer.errors import ConfigError, DataError
+from pioneer.eval.episode import run_episode
+from pioneer.eval.harness import PolicySpec, evaluate
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario, sample_state

@@ -21,16 +21,16 @@ import numpy as np
 import pytest
 import torch
 
-import pioneer.control.teacher as teacher_mod
 import pioneer.learn.dagger as dagger
+import pioneer.reward.default as reward_default
 from pioneer.cli import main
 from pioneer.control.teacher import make_teacher
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, dagger_seed, run_dagger
 from pioneer.sim import scenarios
-from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message
@@ -88,7 +88,7 @@ def tiny_scenario() -> Iterator[str]:
 def reward_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The static study's density reward, fitted once (the tiny scenario has no demos)."""
     path = tmp_path_factory.mktemp("reward") / "static.npz"
-    teacher_mod.default_reward("static").save(path)
+    reward_default.default_reward("static").save(path)
     return path
 
 
@@ -97,9 +97,9 @@ def run_mdn(tmp_path_factory: pytest.TempPathFactory) -> tuple[DaggerResult, lis
     """The reference run (workers=1, default reward → ``DIR/reward.npz``) and its callbacks."""
     out = tmp_path_factory.mktemp("dagger") / "mdn"
     rows: list[dict[str, Any]] = []
-    real = teacher_mod.default_reward
+    real = reward_default.default_reward
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(teacher_mod, "default_reward", lambda scenario: real("static"))
+        mp.setattr(reward_default, "default_reward", lambda scenario: real("static"))
         res = run_dagger(TINY_CFG, out, workers=1, progress=False, on_round=rows.append)
     return res, rows
 

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 import torch
 
-from pioneer.control.policy import build_policy
+from pioneer.control.registry import build_policy
 from pioneer.data import shipped_demos
-from pioneer.demos.dataset import Dataset
 from pioneer.deploy import OnnxStudentPolicy, StudentRuntime, mixture_uncertainty
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError
 from pioneer.learn import MDN, MLPStudent, StudentConfig, export_onnx, train_student
 from pioneer.learn.export import MDN_OUTPUTS
-from pioneer.sim.env import NavEnv
+from pioneer.reward.dataset import Dataset
 from pioneer.sim.lidar import observation_from_scan
 from pioneer.sim.world import scan
 from pioneer_testutils import ROBOT_SIDE_PRELUDE, assert_house_message
@@ -176,7 +176,6 @@ def test_scan_to_command_round_trip(students):
 
 
 def test_onnx_policy_is_registered(students, demo_obs, tmp_path):
-    import pioneer.learn  # noqa: F401  (registers the student policies)
 
     _, path = students["mdn"]
     (tmp_path / "hr-rl.onnx").write_bytes(path.read_bytes())

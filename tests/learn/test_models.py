@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from pioneer.control.policy import build_policy, policy_names
+from pioneer.control.registry import build_policy, policy_names
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError
 from pioneer.learn import (
@@ -395,7 +395,7 @@ def test_corrupt_or_mismatched_checkpoints_are_refused(tmp_path, trained_pair):
 
 # ------------------------------------------------------------------------- policy
 def test_student_policies_are_registered_and_act(tmp_path, trained_pair):
-    from pioneer.sim.env import NavEnv
+    from pioneer.envs.env import NavEnv
 
     assert {"student-mdn", "student-mlp", "student-onnx"} <= set(policy_names())
     save_student(trained_pair[0], tmp_path / "hr-rl.safetensors")

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-import pioneer.learn  # noqa: F401  (registers the student policies)
-from pioneer.control.classic import GoalPolicy
-from pioneer.control.policy import Policy, build_policy, policy_names
-from pioneer.control.teacher import LookaheadTeacher, default_reward, make_teacher
+from pioneer.baselines.classic import GoalPolicy
+from pioneer.control.policy import Policy
+from pioneer.control.registry import build_policy, policy_names
+from pioneer.control.teacher import LookaheadTeacher, make_teacher
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
 from pioneer.learn import (
@@ -29,7 +30,7 @@ from pioneer.learn import (
     train_student,
 )
 from pioneer.learn.shield import default_threshold
-from pioneer.sim.env import NavEnv
+from pioneer.reward.default import default_reward
 from pioneer.sim.scenarios import static_study_scenario
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message

@@ -10,9 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pioneer.demos.dataset import Dataset, feature_map
 from pioneer.errors import DataError
+from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
+from pioneer.reward.features import feature_map
 from pioneer.reward.select import episode_split, select_length_scale
 from pioneer.sim.scenarios import get_scenario
 from pioneer.stats import auroc

@@ -10,11 +10,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env, data_equivalence
 
 import pioneer  # noqa: F401  (registers the environment ids)
-from pioneer.control import GoalPolicy, make_policy, policy_names
+from pioneer.baselines.classic import GoalPolicy
+from pioneer.control import make_policy, policy_names
+from pioneer.envs.env import ENV_IDS, NavEnv, RewardConfig
 from pioneer.errors import CommandError, ConfigError
 from pioneer.eval import run_episode
 from pioneer.sim import GONE, get_scenario, sample_state
-from pioneer.sim.env import ENV_IDS, NavEnv, RewardConfig
 from pioneer_testutils import assert_house_message
 
 IDS = ["pioneer/ElevatorHRRL-v0", "pioneer/ElevatorHLRR-v0", "pioneer/StaticStudy-v0"]

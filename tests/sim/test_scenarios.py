@@ -347,7 +347,7 @@ def test_scenario_config_round_trips_through_dict():
 
 # ------------------------------------------------------------------ user-registered variants
 def test_a_registered_variant_is_reachable_by_name_and_runs(scenario_registry):
-    from pioneer.sim.env import NavEnv
+    from pioneer.envs.env import NavEnv
 
     sc = scenario_registry  # leave no trace for other tests
     deep = ElevatorLayout(lobby_depth=2.8)
@@ -499,8 +499,8 @@ def test_a_bad_entry_registers_nothing_and_a_missing_file_is_named(clean_registr
 
 
 def test_a_variant_with_a_base_uses_the_shipped_demos_and_students_of_it(clean_registry, tmp_path):
-    from pioneer.control.teacher import default_features
     from pioneer.data import base_scenario, shipped_demos, shipped_student
+    from pioneer.reward.default import default_features
 
     sc = clean_registry
     data = {

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pioneer.control import GoalPolicy
+from pioneer.baselines.classic import GoalPolicy
 from pioneer.eval import run_episode
 from pioneer.io import atomic_path
 from pioneer.sim import get_scenario, sample_state, scan, step

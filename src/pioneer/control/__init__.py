@@ -1,25 +1,25 @@
-"""Controllers behind one :class:`~pioneer.control.policy.Policy` protocol."""
+"""PioneeR's own controller and the contract every controller meets.
 
-from pioneer.control.classic import DWAPolicy, GoalPolicy, SocialForceRobotPolicy
-from pioneer.control.cvar_bf import CvarBfConfig, CvarBfPolicy, CvarDecision
-from pioneer.control.policy import Policy, make_policy, policy_names
+:mod:`.policy` is the one ``Policy`` protocol; :mod:`.registry` the one lazy, string-based
+registry of every controller (teacher, baselines, students, plugins); :mod:`.rollout` and
+:mod:`.teacher` the lookahead teacher of the paper (Sec. III).
+"""
+
+from pioneer.control.policy import Policy
+from pioneer.control.registry import build_policy, make_policy, policy_names, register_policy
 from pioneer.control.rollout import Rollout, candidate_commands, rollout
 from pioneer.control.teacher import Decision, LookaheadTeacher, TeacherConfig
 
 __all__ = [
-    "CvarBfConfig",
-    "CvarBfPolicy",
-    "CvarDecision",
-    "DWAPolicy",
     "Decision",
-    "GoalPolicy",
     "LookaheadTeacher",
     "Policy",
     "Rollout",
-    "SocialForceRobotPolicy",
     "TeacherConfig",
+    "build_policy",
     "candidate_commands",
     "make_policy",
     "policy_names",
+    "register_policy",
     "rollout",
 ]

@@ -18,7 +18,6 @@ than ``safety_margin``) is infeasible; if none is feasible the teacher stops at 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
@@ -27,10 +26,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.config import Config
-from pioneer.control.policy import register_policy
 from pioneer.control.rollout import Rollout, candidate_commands, rollout
 from pioneer.errors import ConfigError, expect
+from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
+from pioneer.reward.features import feature_map
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.world import State, World
 
@@ -38,9 +38,7 @@ __all__ = [
     "Decision",
     "LookaheadTeacher",
     "TeacherConfig",
-    "default_reward",
     "make_teacher",
-    "rollout_features",
 ]
 
 F64 = NDArray[np.float64]
@@ -80,17 +78,6 @@ class Decision:
     raw_terms: dict[str, float]  # unweighted R_den, R_goal, R_obs of u*
 
 
-def rollout_features(kind: str, ro: Rollout) -> F64:
-    """Reward features of every rollout state, ``(C·L, D)``: ``xy`` or ``obs_action`` (R^31)."""
-    c, n_l = ro.robot.shape[:2]
-    if kind == "xy":
-        return ro.robot[:, :, :2].reshape(c * n_l, 2)
-    if kind == "obs_action":
-        u = np.broadcast_to(ro.commands[:, None, :], (c, n_l, 2))
-        return np.concatenate([ro.obs.astype(np.float64), u], axis=2).reshape(c * n_l, -1)
-    raise ConfigError(expect("feature map", "'xy' or 'obs_action'", kind, "pick one"))
-
-
 class LookaheadTeacher:
     """The PioneeR teacher as a :class:`~pioneer.control.policy.Policy` (privileged)."""
 
@@ -104,6 +91,7 @@ class LookaheadTeacher:
     ) -> None:
         self.density = density
         self.features = features
+        self._feature_map = feature_map(features)
         self.config = config or TeacherConfig()
         self.extra_score = extra_score
         self.name = name
@@ -178,7 +166,11 @@ class LookaheadTeacher:
         if self.density is not None and w.use_density and n_feasible:
             # Only candidates that can be chosen: about half collide in the lobby, and the
             # density is most of a decision's arithmetic. (Infeasible ones keep 0; they score −∞.)
-            feats = rollout_features(self.features, ro).reshape(c, n_l, -1)[feasible]
+            feats = self._feature_map.from_arrays(
+                ro.robot[:, :, :2].reshape(c * n_l, 2),
+                ro.obs.reshape(c * n_l, -1),
+                np.repeat(ro.commands, n_l, axis=0),
+            ).reshape(c, n_l, -1)[feasible]
             r_den[feasible] = (
                 self.density(feats.reshape(n_feasible * n_l, -1))
                 .reshape(n_feasible, n_l)
@@ -200,28 +192,6 @@ class _Scores(NamedTuple):
     r_den: F64
     r_goal: F64
     r_obs: F64
-
-
-@functools.lru_cache(maxsize=8)
-def default_reward(scenario: str) -> DensityReward:
-    """The density reward fitted on the shipped demos of ``scenario`` (cached per process)."""
-    from pioneer.data import base_scenario, shipped_demos
-    from pioneer.demos.dataset import Dataset, feature_map
-
-    d = Dataset.load(shipped_demos(scenario))
-    fm = feature_map(default_features(scenario))
-    model = DensityReward().fit(fm.from_dataset(d), d.gamma, list(fm.names))
-    model.info_.update({"demos": f"shipped:{base_scenario(scenario)}", "features": fm.name})
-    return model
-
-
-def default_features(scenario: str) -> str:
-    """``xy`` for the static study, ``obs_action`` for the elevator scenarios (a variant is
-    judged by the built-in scenario whose demos it uses)."""
-    from pioneer.data import base_scenario
-    from pioneer.demos.dataset import default_feature_map
-
-    return default_feature_map([base_scenario(scenario)])
 
 
 def make_teacher(
@@ -249,17 +219,3 @@ def make_teacher(
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)
-
-
-register_policy("teacher", make_teacher)
-register_policy(
-    "teacher-no-density",
-    functools.partial(make_teacher, density=False, name="teacher-no-density"),
-)
-register_policy(
-    "teacher-no-goal", functools.partial(make_teacher, goal=False, name="teacher-no-goal")
-)
-register_policy(
-    "teacher-no-obstacle",
-    functools.partial(make_teacher, obstacle=False, name="teacher-no-obstacle"),
-)

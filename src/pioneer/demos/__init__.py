@@ -1,5 +1,3 @@
-"""Demonstrations: the dataset format, scripted demonstrators and keyboard teleoperation."""
-
-from pioneer.demos.dataset import Dataset, FeatureMap, feature_map
-
-__all__ = ["Dataset", "FeatureMap", "feature_map"]
+"""Sources of demonstrations: scripted courteous and careless drivers (:mod:`.scripted`), their
+episode generator (:mod:`.generate`) and keyboard teleoperation (:mod:`.teleop`). The dataset
+format they write is :mod:`pioneer.reward.dataset`."""

@@ -17,11 +17,11 @@ import numpy as np
 from tqdm import tqdm
 
 from pioneer.control.policy import Policy
-from pioneer.demos.dataset import Dataset
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, expect
+from pioneer.reward.dataset import Dataset
 from pioneer.seeds import training_seed
-from pioneer.sim.env import NavEnv
 from pioneer.sim.scenarios import get_scenario
 
 __all__ = ["DEFAULT_SIZES", "Frame", "generate", "record_episode"]

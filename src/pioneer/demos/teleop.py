@@ -5,7 +5,7 @@ Two layers:
 * :class:`TeleopController` — the command state and the key bindings, pure Python (no
   pygame). Keys are named by strings (``"up"``, ``"down"``, ``"left"``, ``"right"``,
   ``"space"``, ``"n"``, ``"b"``, ``"r"``, ``"escape"``).
-* :class:`TeleopSession` — owns a :class:`~pioneer.sim.env.NavEnv`, a pygame window and the
+* :class:`TeleopSession` — owns a :class:`~pioneer.envs.env.NavEnv`, a pygame window and the
   output file. :meth:`TeleopSession.tick` processes the pending pygame events, applies the
   current command for one control period (10 Hz) and redraws; :meth:`TeleopSession.run`
   ticks until you quit.
@@ -44,10 +44,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.demos.dataset import Dataset
 from pioneer.demos.generate import NEGATIVE_WINDOW, Frame, negative_frames
+from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, PioneerError, expect
-from pioneer.sim.env import NavEnv
+from pioneer.reward.dataset import Dataset
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario
 

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.control.policy import Policy
-from pioneer.sim.env import NavEnv
+from pioneer.envs.env import NavEnv
 from pioneer.sim.scenarios import ScenarioConfig
 from pioneer.sim.world import State, World
 

@@ -139,8 +139,7 @@ _POLICY_CACHE: dict[tuple[str, PolicySpec], Any] = {}
 def _make_policy(spec: PolicySpec, scenario: str) -> Any:
     key = (scenario, spec)
     if key not in _POLICY_CACHE:
-        import pioneer.control  # noqa: F401  (registers the policies)
-        from pioneer.control.policy import build_policy
+        from pioneer.control.registry import build_policy
 
         pol = build_policy(spec.name, scenario, **dict(spec.kwargs))
         if spec.label:
@@ -289,29 +288,13 @@ def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
 
 
 def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
-    """Fail before running anything when a policy would load a shipped part the scenario does
-    not have (demos for the teacher's default reward, a student, CrowdNav++ weights) — without
-    building the policies (no torch in the parent)."""
-    from pioneer.data import shipped_crowdnav_weights, shipped_demos, shipped_student
+    """Fail before running anything when a policy would load a part the scenario does not
+    have — each registry entry's light check, without building the policies (no torch)."""
+    from pioneer.control.registry import check_parts
 
     for sc in scenarios:
         for spec in policies:
-            kw = dict(spec.kwargs)
-            name = spec.name
-            if name in ("student-mdn", "student-mlp", "student-shield") and not kw.get(
-                "checkpoint"
-            ):
-                shipped_student(sc, "mlp" if name == "student-mlp" else "mdn")
-            teacher = name in ("teacher", "teacher-no-goal", "teacher-no-obstacle")
-            shield_teacher = (
-                name == "student-shield"
-                and kw.get("mode", "handover") == "handover"
-                and kw.get("fallback", "teacher") == "teacher"
-            )
-            if ((teacher and kw.get("density", True)) or shield_teacher) and not kw.get("reward"):
-                shipped_demos(sc)
-            if name == "crowdnav++" and not kw.get("weights"):
-                shipped_crowdnav_weights(sc)
+            check_parts(spec.name, sc, dict(spec.kwargs))
 
 
 def _record_scenarios(out: Path, names: Sequence[str]) -> None:
@@ -350,8 +333,7 @@ def evaluate(
         )
     if backend not in ("process", "ray"):
         raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
-    import pioneer.control  # noqa: F401  (registers the policies)
-    from pioneer.control.policy import check_policy_name
+    from pioneer.control.registry import check_policy_name
     from pioneer.sim.scenarios import get_scenario
 
     for sc in scenarios:  # fail before running anything, not hours in

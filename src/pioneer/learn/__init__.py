@@ -1,19 +1,11 @@
-"""Students distilled from the teacher: MDN and MLP, uncertainty, checkpoints, ONNX export;
-and the CrowdNav++ RL baseline (:mod:`pioneer.learn.crowdnav`, trained by :mod:`pioneer.learn.ppo`).
+"""Students distilled from the teacher (SPEC 6): MDN and MLP, uncertainty, DAgger, the
+uncertainty shield and ONNX export.
 
-This package imports torch (install the ``learn`` extra). Importing it registers the
-``student-mdn``, ``student-mlp``, ``student-onnx``, ``student-shield`` and ``crowdnav++``
-policies. The torch-free robot runtime is :mod:`pioneer.deploy`.
+This package imports torch (install the ``learn`` extra). The policies ``student-mdn``,
+``student-mlp`` and ``student-shield`` are built by name through
+:mod:`pioneer.control.registry`; the torch-free robot runtime is :mod:`pioneer.deploy`.
 """
 
-from pioneer.learn.crowdnav import (
-    CrowdNavConfig,
-    CrowdNavNet,
-    CrowdNavPolicy,
-    load_crowdnav,
-    make_crowdnav_policy,
-    save_crowdnav,
-)
 from pioneer.learn.export import export_onnx
 from pioneer.learn.models import (
     MDN,
@@ -33,9 +25,6 @@ from pioneer.learn.shield import ShieldPolicy, make_shield_policy
 
 __all__ = [
     "MDN",
-    "CrowdNavConfig",
-    "CrowdNavNet",
-    "CrowdNavPolicy",
     "MLPStudent",
     "ShieldPolicy",
     "Student",
@@ -43,13 +32,10 @@ __all__ = [
     "StudentPolicy",
     "build_student",
     "export_onnx",
-    "load_crowdnav",
     "load_student",
-    "make_crowdnav_policy",
     "make_shield_policy",
     "make_student_policy",
     "read_checkpoint_meta",
-    "save_crowdnav",
     "save_student",
     "select_action",
     "train_student",

@@ -176,7 +176,7 @@ def collect_episode(
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
     labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
     ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
-    from pioneer.sim.env import NavEnv
+    from pioneer.envs.env import NavEnv
 
     teacher = _teacher(scenario, reward)
     student = _student(checkpoint) if checkpoint is not None else None
@@ -352,7 +352,7 @@ def run_dagger(
     _check_scenario(out, cfg.scenario)
     reward_path = Path(reward) if reward is not None else out / "reward.npz"
     if reward is None and not reward_path.exists():
-        from pioneer.control.teacher import default_reward
+        from pioneer.reward.default import default_reward
 
         default_reward(cfg.scenario).save(reward_path)
     n_workers = workers or os.cpu_count() or 1

@@ -45,7 +45,8 @@ from torch import nn
 from pioneer.config import Config, check_nonnegative
 from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.learn.checkpoint import load_checked, read_checkpoint, write_checkpoint
+from pioneer.nn.checkpoint import load_checked, read_checkpoint, write_checkpoint
+from pioneer.nn.layers import seeded_linear
 from pioneer.sim.lidar import OBS_DIM
 
 __all__ = [
@@ -149,15 +150,6 @@ def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") ->
 
 
 # ---------------------------------------------------------------------------------- networks
-def _linear(n_in: int, n_out: int, gen: torch.Generator) -> nn.Linear:
-    # PyTorch's default Linear init, drawn from ``gen`` instead of the global torch RNG.
-    layer: nn.Linear = nn.utils.skip_init(nn.Linear, n_in, n_out)
-    nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5.0), generator=gen)
-    bound = 1.0 / math.sqrt(n_in)
-    nn.init.uniform_(layer.bias, -bound, bound, generator=gen)
-    return layer
-
-
 class Student(nn.Module):
     """Common base: the ReLU/dropout trunk and the normalisation buffers.
 
@@ -177,7 +169,7 @@ class Student(nn.Module):
         layers: list[nn.Module] = []
         n_in = config.obs_dim
         for width in config.hidden:
-            layers += [_linear(n_in, width, gen), nn.ReLU(), nn.Dropout(config.dropout)]
+            layers += [seeded_linear(n_in, width, gen), nn.ReLU(), nn.Dropout(config.dropout)]
             n_in = width
         self.trunk = nn.Sequential(*layers)
         self.register_buffer("obs_mean", torch.zeros(config.obs_dim))
@@ -232,9 +224,9 @@ class MDN(Student):
         gen = torch.Generator().manual_seed(int(seed))
         super().__init__(cfg, gen)
         k, h = cfg.n_components, cfg.hidden[-1]
-        self.logits_head = _linear(h, k, gen)
-        self.mu_head = _linear(h, k * ACTION_DIM, gen)
-        self.sigma_head = _linear(h, k * ACTION_DIM, gen)
+        self.logits_head = seeded_linear(h, k, gen)
+        self.mu_head = seeded_linear(h, k * ACTION_DIM, gen)
+        self.sigma_head = seeded_linear(h, k * ACTION_DIM, gen)
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         h = self.features(obs)
@@ -289,7 +281,7 @@ class MLPStudent(Student):
             raise ConfigError(expect("MLPStudent config.kind", "'mlp'", cfg.kind, "use MDN"))
         gen = torch.Generator().manual_seed(int(seed))
         super().__init__(cfg, gen)
-        self.head = _linear(cfg.hidden[-1], ACTION_DIM, gen)
+        self.head = seeded_linear(cfg.hidden[-1], ACTION_DIM, gen)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         out: torch.Tensor = self.head(self.features(obs)) * self.act_std + self.act_mean

@@ -13,7 +13,6 @@ teacher's reward path).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -23,8 +22,6 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from pioneer.control.policy import register_policy
-from pioneer.deploy.runtime import make_onnx_student_policy
 from pioneer.errors import ConfigError, expect
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
 
@@ -108,12 +105,3 @@ def make_student_policy(
     policy = StudentPolicy(model, name=name, action_mode=action_mode)
     policy.checkpoint = Path(path)
     return policy
-
-
-register_policy(
-    "student-mdn", functools.partial(make_student_policy, kind="mdn", name="student-mdn")
-)
-register_policy(
-    "student-mlp", functools.partial(make_student_policy, kind="mlp", name="student-mlp")
-)
-register_policy("student-onnx", make_onnx_student_policy)

@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.control.policy import Policy, build_policy, register_policy
+from pioneer.control.policy import Policy
+from pioneer.control.registry import build_policy
 from pioneer.control.teacher import LookaheadTeacher
 from pioneer.errors import ConfigError, expect
 from pioneer.learn.models import read_checkpoint_meta
@@ -146,6 +147,3 @@ def make_shield_policy(
         kwargs: dict[str, Any] = {"reward": reward} if (fallback == "teacher" and reward) else {}
         fb = build_policy(fallback, scenario, **kwargs)
     return ShieldPolicy(student, fb, thr, signal, mode, slow_factor, name=name)
-
-
-register_policy("student-shield", make_shield_policy)

@@ -184,6 +184,20 @@ class State:
             )
         return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})
 
+    @staticmethod
+    def concat(states: Sequence[State]) -> State:
+        """One state holding every copy of ``states`` in order (B = ΣB_i, equal N)."""
+        if not states:
+            raise ConfigError(expect("State.concat", "at least one state", 0, "pass states"))
+        names = [f.name for f in dataclasses.fields(State)]
+        return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in names})
+
+    def put(self, index: int, single: State) -> None:
+        """Overwrite copy ``index`` in place with the B = 1 state ``single`` (an episode that
+        restarts inside a batch)."""
+        for k, v in self._arrays().items():
+            v[index] = getattr(single, k)[0]
+
     def take(self, index: int | NDArray[np.int64]) -> State:
         """The copies at ``index`` (an int keeps a batch axis of 1)."""
         idx = np.atleast_1d(np.asarray(index))

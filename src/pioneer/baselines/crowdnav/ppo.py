@@ -41,7 +41,7 @@ values, except:
   so 4× the data per update comes almost free in wall time; they fine-tune an imitation
   warm start (below) with lr 3e−5 and no entropy bonus (``--lr 3e-5 --entropy-coef 0``).
 
-Imitation warm start (``--bc-episodes N``, :mod:`pioneer.learn.crowdnav_bc`; a deviation from
+Imitation warm start (``--bc-episodes N``, :mod:`.imitation`; a deviation from
 CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
 clones the lookahead teacher (optionally with DAgger rounds); its result is stored in ``out``
 and in the first checkpoint, so a resumed run never redoes it. ``--critic-warmup U``: the
@@ -59,7 +59,7 @@ Outputs in ``out/`` (each written atomically)
                                 (numpy ``bit_generator.state`` as JSON ints, torch generator
                                 bytes as a tensor) — a resumed run is identical to an
                                 uninterrupted one;
-    ``policy.safetensors``      the policy weights (:func:`pioneer.learn.crowdnav.load_crowdnav`);
+    ``policy.safetensors``      the policy weights (:func:`~.network.load_crowdnav`);
     ``curve.csv`` / ``curve.png``  the learning curve, ``train.json`` the run's summary;
     ``bc_data.npz`` / ``bc_policy.safetensors``  the imitation data and the cloned policy
                                 (with ``--bc-episodes``).
@@ -86,18 +86,16 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_nonnegative, check_positive
-from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import atomic_path, write_text_atomic
-from pioneer.learn.crowdnav import (
-    CrowdNavConfig,
-    CrowdNavNet,
+from pioneer.baselines.crowdnav.imitation import WarmStartConfig
+from pioneer.baselines.crowdnav.network import CrowdNavConfig, CrowdNavNet, save_crowdnav
+from pioneer.baselines.crowdnav.observation import (
     CrowdNavObs,
     build_observation,
     command_from_action,
-    save_crowdnav,
 )
-from pioneer.learn.crowdnav_bc import WarmStartConfig
+from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import atomic_path, write_text_atomic
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, step
 
@@ -337,7 +335,7 @@ class _Trainer:
 
     # -------------------------------------------------------------------- rollout
     def _policy_step(self, obs: CrowdNavObs) -> tuple[torch.Tensor, ...]:
-        from pioneer.learn.crowdnav import obs_tensors
+        from pioneer.baselines.crowdnav.observation import obs_tensors
 
         keep = torch.from_numpy(~self.start).to(torch.float32).unsqueeze(-1)
         x, _, _ = self.model.encode(*obs_tensors(obs))
@@ -677,14 +675,14 @@ def train_crowdnav(
     out.mkdir(parents=True, exist_ok=True)
     if warm.bc_episodes:
         # Imitation first (reused from out/ when done); the checkpoint then holds its result.
-        from pioneer.learn.crowdnav_bc import warm_start
+        from pioneer.baselines.crowdnav.imitation import warm_start
 
         if resumed_from is None:
             bc_model, bc_info = warm_start(sc, net, warm, ppo.seed, out, progress=progress)
             tr.model.load_state_dict(bc_model.state_dict(), strict=True)
             tr.save(ckpt)
         elif (out / "bc_policy.safetensors").is_file():
-            from pioneer.learn.crowdnav import read_crowdnav_meta
+            from pioneer.baselines.crowdnav.network import read_crowdnav_meta
 
             bc_info = read_crowdnav_meta(out / "bc_policy.safetensors")["info"]
 

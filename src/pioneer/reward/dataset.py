@@ -24,7 +24,7 @@ from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path, load_npz
 from pioneer.sim.lidar import observation_names
 
-__all__ = ["FORMAT", "Dataset", "FeatureMap", "default_feature_map", "feature_map"]
+__all__ = ["FORMAT", "OBS_DIM", "UNITS", "Dataset"]
 
 FORMAT = "pioneer.demos/1"
 OBS_DIM = 29
@@ -297,31 +297,3 @@ def _validate(arrays: dict[str, NDArray[Any]], scenarios: tuple[str, ...], where
                 "fix the scenario list",
             )
         )
-
-
-@dataclasses.dataclass(frozen=True)
-class FeatureMap:
-    """Turns dataset rows (or rollout states) into reward features z."""
-
-    name: str  # "xy" (static study) or "obs_action" (elevator, R^31)
-    names: tuple[str, ...]
-
-    def from_dataset(self, d: Dataset) -> NDArray[np.float64]:
-        """Features of every row, ``(N, D)``."""
-        if self.name == "xy":
-            return d.pose[:, :2].astype(np.float64)
-        return np.concatenate([d.obs.astype(np.float64), d.action], axis=1)
-
-
-def feature_map(name: str) -> FeatureMap:
-    """``xy`` → (x, y); ``obs_action`` → (o, u) ∈ R^31."""
-    if name == "xy":
-        return FeatureMap("xy", ("x", "y"))
-    if name == "obs_action":
-        return FeatureMap("obs_action", (*observation_names(), "v", "omega"))
-    raise DataError(expect("feature map", "'xy' or 'obs_action'", name, "pick one"))
-
-
-def default_feature_map(scenarios: Sequence[str]) -> str:
-    """``xy`` when every scenario is the static study, else ``obs_action`` (the elevator)."""
-    return "xy" if scenarios and all(s.startswith("static") for s in scenarios) else "obs_action"

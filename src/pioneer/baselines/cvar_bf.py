@@ -9,7 +9,7 @@ Formulation as implemented
 --------------------------
 Robot pose x = (p_r, θ), command u = (v, ω), control period Δt = 0.1 s.
 
-*Nominal command* (proportional go-to-goal, as :class:`~pioneer.control.classic.GoalPolicy`):
+*Nominal command* (proportional go-to-goal, as :class:`~pioneer.baselines.classic.GoalPolicy`):
 φ = wrap(atan2(g − p_r) − θ), ω_nom = clip(k_ω φ, ±ω_max),
 v_nom = v_max · max(0, cos φ) · min(1, ‖g − p_r‖ / d_slow).
 
@@ -121,7 +121,6 @@ import scipy.optimize
 from numpy.typing import NDArray
 
 from pioneer.config import Config, check_nonnegative, check_positive
-from pioneer.control.policy import register_policy
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
@@ -778,6 +777,3 @@ class CvarBfPolicy:
 def make_cvar_bf(**overrides: Any) -> CvarBfPolicy:
     """``cvar-bf`` with optional :class:`CvarBfConfig` overrides (e.g. ``lookahead=0.2``)."""
     return CvarBfPolicy(CvarBfConfig.from_dict(overrides) if overrides else None)
-
-
-register_policy("cvar-bf", make_cvar_bf)

@@ -5,14 +5,14 @@ CADRL/SARL: value networks initialised by imitation learning on demonstrations).
 CrowdNav++ runs (2.5 M steps, 1/8 of the original's budget) settle in a local optimum — drive
 to the door and wait — so ``pioneer train crowdnav++ --bc-episodes N`` first imitates the
 privileged lookahead teacher (:func:`pioneer.control.teacher.make_teacher`) and then
-fine-tunes with PPO (:mod:`pioneer.learn.ppo`). This is a deviation from CrowdNav++, which
+fine-tunes with PPO (:mod:`.ppo`). This is a deviation from CrowdNav++, which
 trains by RL alone; docs/baselines.md reports both.
 
 Demonstrations in the policy's action space
     The teacher drives the scenario *through the policy's action space*: at every step its
     command u* = ``teacher.decide(world, state, prev=state.command[0]).command`` is mapped to
     the raw action a (:func:`action_from_command`, the inverse of
-    :func:`pioneer.learn.crowdnav.command_from_action`): Δv = v* − v_{t−1} and Δθ = ω* Δt,
+    :func:`~.observation.command_from_action`): Δv = v* − v_{t−1} and Δθ = ω* Δt,
     clipped to the increment bounds and scaled onto [−1, 1]², and the command that a produces
     is the one applied. A policy that replays the recorded actions from the episode's initial
     state therefore reproduces the demonstration exactly; the clipping changes the teacher's
@@ -33,7 +33,7 @@ DAgger (Ross et al. 2011), ``dagger_rounds`` > 0
     Round r lets the policy cloned from rounds < r drive (mean action) for ``dagger_episodes``
     episodes, labels every visited state with the teacher's action and aggregates.
 
-Critic warm-up (in :mod:`pioneer.learn.ppo`)
+Critic warm-up (in :mod:`pioneer.baselines.crowdnav.ppo`)
     ``critic_warmup`` PPO updates train only the critic head (its own Adam, ``critic_lr``) on
     the cloned policy's returns, with the shared encoder, GRU and actor frozen, so that PPO's
     first policy updates use sensible advantages instead of a random critic's.
@@ -42,7 +42,7 @@ Files (in the training ``out``; written atomically, no pickle)
     ``bc_data.npz``             the aggregated dataset, with its settings as JSON (``meta``);
                                 collection resumes at the first missing round (the teacher's
                                 round is kept when only the cloning settings changed);
-    ``bc_policy.safetensors``   the cloned policy (:func:`pioneer.learn.crowdnav.load_crowdnav`);
+    ``bc_policy.safetensors``   the cloned policy (:func:`~.network.load_crowdnav`);
                                 when present the imitation phase is not redone.
 """
 
@@ -61,19 +61,21 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_positive
-from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import atomic_path, load_npz
-from pioneer.learn.crowdnav import (
+from pioneer.baselines.crowdnav.network import (
     CrowdNavConfig,
     CrowdNavNet,
-    build_observation,
-    command_from_action,
     load_crowdnav,
-    obs_tensors,
     read_crowdnav_meta,
     save_crowdnav,
 )
+from pioneer.baselines.crowdnav.observation import (
+    build_observation,
+    command_from_action,
+    obs_tensors,
+)
+from pioneer.config import Config, check_positive
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import atomic_path, load_npz
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
 from pioneer.sim.world import State, World, step
 
@@ -158,7 +160,7 @@ def action_from_command(
 ) -> F64:
     """Raw actions ``(B, 2)`` in [−1, 1]² whose commands come closest to ``command`` ``(B, 2)``.
 
-    The inverse of :func:`~pioneer.learn.crowdnav.command_from_action`: Δv = v − v_prev and
+    The inverse of :func:`~.observation.command_from_action`: Δv = v − v_prev and
     Δθ = ω Δt, each scaled by the bound on its side (0 ↦ 0) and clipped to [−1, 1].
     """
     u = np.asarray(command, dtype=np.float64).reshape(-1, 2)
@@ -334,13 +336,12 @@ def expert_command(expert: Any, world: World, state: State) -> F64:
 
 def make_expert(name: str, scenario: str) -> Any:
     """The demonstrator ``name`` (one of :data:`EXPERTS`) for ``scenario``."""
-    from pioneer.control.policy import build_policy
+    from pioneer.control.registry import build_policy
 
     if name == "teacher":
         from pioneer.control.teacher import make_teacher
 
         return make_teacher(scenario)
-    import pioneer.control  # noqa: F401  (registers the classical controllers)
 
     return build_policy(name, scenario)
 

@@ -110,8 +110,7 @@ def _humans_alone(world: Any, state0: Any, time_limit: float) -> tuple[bool, lis
 def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     """The three runs of one validation episode (a picklable task for the worker pool):
     ``(scenario, seed, driver)``, the driver a policy name (``teacher`` by default)."""
-    import pioneer.control  # noqa: F401  (registers the policies)
-    from pioneer.control.policy import build_policy
+    from pioneer.control.registry import build_policy
     from pioneer.demos.scripted import CarelessDriver
     from pioneer.eval.episode import run_episode
     from pioneer.sim.humans import GONE
@@ -215,8 +214,7 @@ def calibrate(
     """Measure the world statistics of ``scenarios`` on ``episodes`` validation seeds each;
     write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
     policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
-    import pioneer.control  # noqa: F401  (registers the policies)
-    from pioneer.control.policy import policy_factory
+    from pioneer.control.registry import policy_factory
     from pioneer.sim.scenarios import get_scenario, pin_scenario
 
     if episodes < 1:

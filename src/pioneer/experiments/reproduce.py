@@ -53,7 +53,7 @@ CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Tabl
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
     """Fit and save the reward of every scenario; returns the model paths."""
-    from pioneer.control.teacher import default_reward
+    from pioneer.reward.default import default_reward
 
     paths = {}
     for sc in scenarios:
@@ -182,9 +182,9 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
 def _figures(out: Path, reward_tpl: str) -> dict[str, str]:
     from pioneer.control.teacher import make_teacher
     from pioneer.data import shipped_demos
-    from pioneer.demos.dataset import Dataset
     from pioneer.eval.episode import run_episode
-    from pioneer.reward.study import run_static_study
+    from pioneer.experiments.static_study import run_static_study
+    from pioneer.reward.dataset import Dataset
     from pioneer.sim.scenarios import get_scenario, sample_state
     from pioneer.viz import plot_trajectory, render_frame, save_gif
 

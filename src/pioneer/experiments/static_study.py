@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from pioneer.control.teacher import LookaheadTeacher
-from pioneer.demos.dataset import Dataset, feature_map
 from pioneer.eval.episode import run_episode
+from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
+from pioneer.reward.features import feature_map
 from pioneer.reward.rules import adaptive_weights, goal_term
 from pioneer.sim.scenarios import get_scenario
 from pioneer.sim.world import State, observe

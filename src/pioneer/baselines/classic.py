@@ -14,7 +14,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.control.policy import register_policy
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
@@ -55,9 +54,6 @@ class GoalPolicy:
         w = float(np.clip(self.k_omega * bearing, -self.omega_max, self.omega_max))
         v = self.v_max * max(0.0, math.cos(bearing)) * min(1.0, d_goal / self.slow_distance)
         return np.array([v, w])
-
-
-register_policy("goal", GoalPolicy)
 
 
 # --------------------------------------------------------------------------------------------
@@ -335,7 +331,3 @@ class SocialForceRobotPolicy:
         v_r = state.command[0, 0] * np.array([math.cos(th), math.sin(th)])
         v_d = v_r + self.force(world, state) * world.sim.dt
         return _heading_command(v_d, th, self.k_omega, rob.v_max, rob.omega_max)
-
-
-register_policy("dwa", DWAPolicy)
-register_policy("sfm", SocialForceRobotPolicy)

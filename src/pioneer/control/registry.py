@@ -1,0 +1,269 @@
+"""The one lazy policy registry: every controller by name, resolved by entry-point string.
+
+Like Gymnasium's environment registry, an entry names its factory as ``"module:attribute"``;
+nothing is imported until a policy is built, so every name resolves without prior imports
+(and the evaluation parent never loads torch). Each entry may also name a *check* — a light
+function ``check(scenario, kwargs)`` that raises before a run starts when a part the policy
+would load is missing (shipped demos, weights, students).
+
+Third-party packages add policies through the ``pioneer.policies`` entry-point group::
+
+    [project.entry-points."pioneer.policies"]
+    my-planner = "my_package.planner:make_planner"
+
+The value may also point at a :class:`PolicyEntry` (to give fixed keyword arguments, a check
+or the extra that provides it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.metadata
+import inspect
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from pioneer.control.policy import Policy
+from pioneer.errors import ConfigError, expect
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "PolicyEntry",
+    "build_policy",
+    "check_parts",
+    "check_policy_kwargs",
+    "check_policy_name",
+    "make_policy",
+    "policy_entry",
+    "policy_factory",
+    "policy_names",
+    "register_policy",
+]
+
+ENTRY_POINT_GROUP = "pioneer.policies"
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyEntry:
+    """A registered policy: its factory (``"module:attribute"`` or a callable), the keyword
+    arguments fixed for this name, an optional light check of its parts, and the pip extra
+    whose packages the factory imports."""
+
+    name: str
+    entry_point: str | Callable[..., Policy]
+    kwargs: tuple[tuple[str, Any], ...] = ()
+    check: str | None = None  # "module:function(scenario, kwargs)"
+    extra: str = ""  # e.g. "learn" (torch)
+    summary: str = ""
+
+    def factory(self) -> Callable[..., Policy]:
+        """The factory with this entry's fixed keyword arguments (imports its module)."""
+        fn = self.entry_point if callable(self.entry_point) else self._load(self.entry_point)
+        if not self.kwargs:
+            return fn
+        fixed = dict(self.kwargs)
+
+        def bound(**kw: Any) -> Policy:
+            return fn(**{**fixed, **kw})
+
+        bound.__signature__ = inspect.signature(fn)  # type: ignore[attr-defined]
+        return bound
+
+    def _load(self, target: str) -> Any:
+        module, _, attr = target.partition(":")
+        try:
+            obj: Any = importlib.import_module(module)
+        except ImportError as exc:
+            fix = f"pip install 'pioneer-nav[{self.extra}]'" if self.extra else "install it"
+            raise ConfigError(
+                expect(f"policy {self.name!r}", f"{target} importable", str(exc), fix)
+            ) from exc
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+        return obj
+
+
+def _builtin(
+    key: str, target: str, summary: str, *, check: str | None = None, extra: str = "", **kw: Any
+) -> PolicyEntry:
+    return PolicyEntry(key, target, tuple(sorted(kw.items())), check, extra, summary)
+
+
+_TEACHER = "pioneer.control.teacher:make_teacher"
+_PARTS = "pioneer.data.parts"
+_BUILTINS = (
+    _builtin("teacher", _TEACHER, "lookahead teacher (paper Sec. III)", check=f"{_PARTS}:teacher"),
+    _builtin(
+        "teacher-no-density",
+        _TEACHER,
+        "teacher without R_den (Table II)",
+        density=False,
+        name="teacher-no-density",
+    ),
+    _builtin(
+        "teacher-no-goal",
+        _TEACHER,
+        "teacher without R_goal (Table II)",
+        check=f"{_PARTS}:teacher",
+        goal=False,
+        name="teacher-no-goal",
+    ),
+    _builtin(
+        "teacher-no-obstacle",
+        _TEACHER,
+        "teacher without R_obs (Table II)",
+        check=f"{_PARTS}:teacher",
+        obstacle=False,
+        name="teacher-no-obstacle",
+    ),
+    _builtin("goal", "pioneer.baselines.classic:GoalPolicy", "drive straight to the goal"),
+    _builtin("dwa", "pioneer.baselines.classic:DWAPolicy", "dynamic window approach"),
+    _builtin("sfm", "pioneer.baselines.classic:SocialForceRobotPolicy", "social-force robot"),
+    _builtin("cvar-bf", "pioneer.baselines.cvar_bf:make_cvar_bf", "adaptive CVaR barrier QP"),
+    _builtin(
+        "crowdnav++",
+        "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
+        "CrowdNav++ GRU-attention PPO policy",
+        check=f"{_PARTS}:crowdnav",
+        extra="learn",
+    ),
+    _builtin(
+        "student-mdn",
+        "pioneer.learn.policy:make_student_policy",
+        "DAgger MDN student",
+        check=f"{_PARTS}:student",
+        extra="learn",
+        kind="mdn",
+        name="student-mdn",
+    ),
+    _builtin(
+        "student-mlp",
+        "pioneer.learn.policy:make_student_policy",
+        "DAgger MLP student",
+        check=f"{_PARTS}:student",
+        extra="learn",
+        kind="mlp",
+        name="student-mlp",
+    ),
+    _builtin(
+        "student-onnx",
+        "pioneer.deploy.runtime:make_onnx_student_policy",
+        "exported student on ONNX Runtime",
+        extra="deploy",
+    ),
+    _builtin(
+        "student-shield",
+        "pioneer.learn.shield:make_shield_policy",
+        "MDN student with an uncertainty shield",
+        check=f"{_PARTS}:shield",
+        extra="learn",
+    ),
+)
+
+_ENTRIES: dict[str, PolicyEntry] = {e.name: e for e in _BUILTINS}
+_PLUGINS_LOADED = False
+
+
+def _load_plugins() -> None:
+    """Add the ``pioneer.policies`` entry points of installed distributions (once)."""
+    global _PLUGINS_LOADED
+    if _PLUGINS_LOADED:
+        return
+    _PLUGINS_LOADED = True
+    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in _ENTRIES:
+            continue  # a plugin never shadows a registered name
+        entry = PolicyEntry(ep.name, ep.value, summary=f"from {ep.value}")
+        _ENTRIES[ep.name] = entry
+
+
+def register_policy(
+    name: str,
+    factory: str | Callable[..., Policy],
+    *,
+    check: str | None = None,
+    extra: str = "",
+    summary: str = "",
+    **kwargs: Any,
+) -> PolicyEntry:
+    """Make a policy constructible by name: ``factory`` is ``"module:attribute"`` (imported on
+    first use) or a callable; ``kwargs`` are fixed for this name."""
+    entry = PolicyEntry(name, factory, tuple(sorted(kwargs.items())), check, extra, summary)
+    _ENTRIES[name] = entry
+    return entry
+
+
+def policy_names() -> list[str]:
+    """Every registered policy name (built-in and plugins)."""
+    _load_plugins()
+    return sorted(_ENTRIES)
+
+
+def policy_entry(name: str) -> PolicyEntry:
+    """The entry of ``name``, or :class:`ConfigError` listing the known names."""
+    _load_plugins()
+    entry = _ENTRIES.get(name)
+    if entry is None:
+        raise ConfigError(
+            expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
+        )
+    # A plugin's entry point may name a PolicyEntry instead of a factory.
+    if isinstance(entry.entry_point, str) and entry.summary.startswith("from "):
+        obj = entry._load(entry.entry_point)
+        if isinstance(obj, PolicyEntry):
+            entry = dataclasses.replace(obj, name=name)
+            _ENTRIES[name] = entry
+    return entry
+
+
+def check_policy_name(name: str) -> None:
+    """Raise :class:`ConfigError` unless ``name`` is registered (imports nothing)."""
+    _load_plugins()
+    if name not in _ENTRIES:
+        policy_entry(name)
+
+
+def policy_factory(name: str) -> Callable[..., Policy]:
+    """The factory registered under ``name`` (imports its module)."""
+    return policy_entry(name).factory()
+
+
+def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> None:
+    """Raise :class:`ConfigError` unless the factory of ``name`` takes every key of ``kwargs``
+    (imports the factory: torch for the students)."""
+    params = inspect.signature(policy_factory(name)).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    allowed = sorted(k for k in params if k != "scenario")
+    unknown = sorted(set(kwargs) - set(allowed))
+    if unknown:
+        raise ConfigError(
+            expect(
+                f"policy {name!r} parameters",
+                f"keys among {allowed}",
+                unknown,
+                "correct the key (see the policy's factory)",
+            )
+        )
+
+
+def check_parts(name: str, scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Run the entry's light check of the parts it would load for ``scenario`` (no torch)."""
+    entry = policy_entry(name)
+    if entry.check:
+        entry._load(entry.check)(scenario, {**dict(entry.kwargs), **kwargs})
+
+
+def build_policy(name: str, scenario: str | None = None, **kwargs: Any) -> Policy:
+    """Construct ``name``, passing ``scenario`` only to factories that take it (the teacher
+    needs the scenario to pick its reward; the go-to-goal controller does not)."""
+    factory = policy_factory(name)
+    if scenario is not None and "scenario" in inspect.signature(factory).parameters:
+        kwargs["scenario"] = scenario
+    return factory(**kwargs)
+
+
+def make_policy(name: str, **kwargs: Any) -> Policy:
+    """Construct a registered policy by name."""
+    return policy_factory(name)(**kwargs)

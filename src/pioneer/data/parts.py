@@ -1,0 +1,41 @@
+"""Light checks of the shipped parts a policy would load, run before an evaluation starts.
+
+The policy registry (:mod:`pioneer.control.registry`) names these by string; each takes the
+scenario and the policy's keyword arguments and raises :class:`~pioneer.errors.DataError`
+(from the locators in :mod:`pioneer.data`) when the part is missing. None imports torch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from pioneer.data import shipped_crowdnav_weights, shipped_demos, shipped_student
+
+__all__ = ["crowdnav", "shield", "student", "teacher"]
+
+
+def teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """The teacher's default reward is fitted on the scenario's shipped demos."""
+    if kwargs.get("density", True) and not kwargs.get("reward"):
+        shipped_demos(scenario)
+
+
+def student(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
+    if not kwargs.get("checkpoint"):
+        shipped_student(scenario, str(kwargs.get("kind", "mdn")))
+
+
+def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """The shielded MDN student, and the teacher it hands over to."""
+    student(scenario, {**kwargs, "kind": "mdn"})
+    handover = kwargs.get("mode", "handover") == "handover"
+    if handover and kwargs.get("fallback", "teacher") == "teacher":
+        teacher(scenario, {"reward": kwargs.get("reward")})
+
+
+def crowdnav(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``weights`` CrowdNav++ loads the scenario's shipped weights."""
+    if not kwargs.get("weights"):
+        shipped_crowdnav_weights(scenario)
