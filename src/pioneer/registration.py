@@ -1,8 +1,9 @@
 """Gymnasium ids of the PioneeR environments.
 
-They are registered by entry-point string, so ``import pioneer`` makes ``gymnasium.make``
-work without loading the simulator (or numba) until an environment is made — and the
-robot-side runtime (:mod:`pioneer.deploy`) stays light.
+They are registered by entry-point string, so ``import pioneer`` makes ``gymnasium.make`` and
+``gymnasium.make_vec`` (the native :class:`~pioneer.envs.vector.NavVectorEnv`, through the
+``vector_entry_point``) work without loading the simulator (or numba) until an environment is
+made — and the robot-side runtime (:mod:`pioneer.deploy`) stays light.
 """
 
 from __future__ import annotations
@@ -23,5 +24,8 @@ def register_envs() -> None:
     for env_id, name in ENV_IDS.items():
         if env_id not in gym.registry:
             gym.register(
-                id=env_id, entry_point="pioneer.envs.env:NavEnv", kwargs={"scenario": name}
+                id=env_id,
+                entry_point="pioneer.envs.env:NavEnv",
+                vector_entry_point="pioneer.envs.vector:NavVectorEnv",
+                kwargs={"scenario": name},
             )

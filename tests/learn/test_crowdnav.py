@@ -34,13 +34,15 @@ from pioneer.baselines.crowdnav.network import (
 )
 from pioneer.baselines.crowdnav.observation import build_observation, command_from_action
 from pioneer.baselines.crowdnav.policy import CrowdNavPolicy
-from pioneer.baselines.crowdnav.ppo import PPOConfig, RewardConfig, compute_gae, crowdnav_reward
+from pioneer.baselines.crowdnav.ppo import PPOConfig, compute_gae
 from pioneer.cli import main
 from pioneer.control.registry import build_policy
 from pioneer.data import shipped_crowdnav_weights as shipped_weights
 from pioneer.errors import ConfigError, DataError
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import PolicySpec, evaluate
+from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
+from pioneer.reward.crowdnav import crowdnav_reward
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario, sample_state

@@ -3,14 +3,13 @@
 Observation ``Box(29,)`` float32 (SPEC 1.4); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
 10 Hz. ``terminated`` on success or collision, ``truncated`` at the time limit (30 s).
 
-The environment's scalar reward is a CrowdNav++-style shaping (REFERENCES.md) for RL
-baselines; PioneeR's own learned reward lives in ``pioneer.reward``. Its per-term breakdown is
-in ``info["rewards"]``.
+The environment's scalar reward is the CrowdNav++ reward (:mod:`pioneer.reward.crowdnav`,
+REFERENCES.md), the one the CrowdNav++ baseline trains on; PioneeR's own learned reward is
+:mod:`pioneer.reward.density`. Its per-term breakdown is in ``info["rewards"]``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -18,25 +17,32 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.registration import ENV_IDS, register_envs
+from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward_terms
+from pioneer.sim.events import Event
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
-__all__ = ["ENV_IDS", "NavEnv", "RewardConfig", "register_envs"]
+__all__ = ["ENV_IDS", "NavEnv", "register_envs", "spaces"]
 
 
-@dataclasses.dataclass(frozen=True)
-class RewardConfig(Config):
-    """Shaping reward of the environment (CrowdNav++ unicycle values)."""
-
-    success: float = 10.0  # on reaching the goal
-    collision: float = -20.0  # on a collision
-    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
-    discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt when d < d_disc
-    progress: float = 3.0  # × decrease of goal distance [1/m]
-    spin: float = -4.5  # × ω² · Δt [s²/rad²]
+def spaces(scenario: ScenarioConfig) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+    """Observation ``Box(29,)`` (SPEC 1.4) and action ``Box(2,)`` (v, ω) of one copy."""
+    sim = scenario.sim
+    lid = sim.lidar
+    n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1
+    observation = gym.spaces.Box(
+        low=np.array([0.0] * n_dist + [-math.pi] * n_ang, dtype=np.float32),
+        high=np.array([lid.max_range] * n_dist + [math.pi] * n_ang, dtype=np.float32),
+        dtype=np.float32,
+    )
+    action = gym.spaces.Box(
+        low=sim.robot.command_low.astype(np.float32),
+        high=sim.robot.command_high.astype(np.float32),
+        dtype=np.float32,
+    )
+    return observation, action
 
 
 class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -54,7 +60,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self,
         scenario: str | ScenarioConfig = "hr-rl",
         render_mode: str | None = None,
-        reward: RewardConfig | None = None,
+        reward: CrowdNavRewardConfig | None = None,
     ) -> None:
         self.scenario = get_scenario(scenario) if isinstance(scenario, str) else scenario
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -62,21 +68,9 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 expect("render_mode", f"one of {self.metadata['render_modes']}", render_mode, "")
             )
         self.render_mode = render_mode
-        self.reward_cfg = reward or RewardConfig()
+        self.reward_cfg = reward or CrowdNavRewardConfig()
         self.world: World = self.scenario.world()
-        sim = self.scenario.sim
-        lid = sim.lidar
-        n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1
-        self.observation_space = gym.spaces.Box(
-            low=np.array([0.0] * n_dist + [-math.pi] * n_ang, dtype=np.float32),
-            high=np.array([lid.max_range] * n_dist + [math.pi] * n_ang, dtype=np.float32),
-            dtype=np.float32,
-        )
-        self.action_space = gym.spaces.Box(
-            low=sim.robot.command_low.astype(np.float32),
-            high=sim.robot.command_high.astype(np.float32),
-            dtype=np.float32,
-        )
+        self.observation_space, self.action_space = spaces(self.scenario)
         self._state: State | None = None
         self._ep_min_clear = math.inf
 
@@ -114,34 +108,12 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         new = step(self.world, prev, np.asarray(action, dtype=np.float64))
         self._state = new
         self._ep_min_clear = min(self._ep_min_clear, float(new.clearance[0]))
-        collided = bool(new.collided[0])
-        reached = bool(new.reached[0])
-        timeout = bool(
-            not (collided or reached) and new.t[0] >= self.scenario.sim.time_limit - 1e-9
-        )
-        event = (
-            "collision" if collided else "success" if reached else "timeout" if timeout else None
-        )
-        rewards = self._rewards(prev, new, event)
+        terms, total, codes = crowdnav_reward_terms(self.world, prev, new, self.reward_cfg)
+        event = Event(int(codes[0]))
         obs = observe(self.world, new, self.np_random)[0]
-        info = self._info(event, rewards)
-        return obs, float(sum(rewards.values())), collided or reached, timeout, info
-
-    def _rewards(self, prev: State, new: State, event: str | None) -> dict[str, float]:
-        rc = self.reward_cfg
-        d0 = float(np.linalg.norm(prev.goal[0] - prev.robot[0, :2]))
-        d1 = float(np.linalg.norm(new.goal[0] - new.robot[0, :2]))
-        dt = self.scenario.sim.dt
-        c = float(new.clearance[0])
-        return {
-            "success": rc.success if event == "success" else 0.0,
-            "collision": rc.collision if event == "collision" else 0.0,
-            "discomfort": (c - rc.discomfort_distance) * rc.discomfort_scale * dt
-            if 0.0 <= c < rc.discomfort_distance
-            else 0.0,
-            "progress": rc.progress * (d0 - d1),
-            "spin": rc.spin * float(new.command[0, 1]) ** 2 * dt,
-        }
+        info = self._info(event.label, {k: float(v[0]) for k, v in terms.items()})
+        ended = event in (Event.SUCCESS, Event.COLLISION)
+        return obs, float(total[0]), ended, event is Event.TIMEOUT, info
 
     def _info(self, event: str | None, rewards: dict[str, float]) -> dict[str, Any]:
         s = self.state

@@ -76,6 +76,7 @@ from pioneer.baselines.crowdnav.observation import (
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, load_npz
+from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
 from pioneer.sim.world import State, World, step
 
@@ -96,7 +97,6 @@ DATA_FORMAT = "pioneer.crowdnav-bc/1"
 DATA_FILE = "bc_data.npz"
 POLICY_FILE = "bc_policy.safetensors"
 EXPERTS = ("sfm", "dwa", "teacher")
-SUCCESS, COLLISION, TIMEOUT = 1, 2, 3
 F64 = NDArray[np.float64]
 
 
@@ -230,8 +230,8 @@ class BCData:
             ev = self.ep_event[self.ep_round == r]
             out[f"round{int(r)}"] = {
                 "episodes": int(ev.size),
-                "success_rate": float(np.mean(ev == SUCCESS)),
-                "collision_rate": float(np.mean(ev == COLLISION)),
+                "success_rate": float(np.mean(ev == Event.SUCCESS)),
+                "collision_rate": float(np.mean(ev == Event.COLLISION)),
             }
         t = self.ep_round[self.episode] == 0
         if t.any():
@@ -310,10 +310,12 @@ def collect_episodes(
             cols["teacher_command"].append(u_star.reshape(1, 2))
             cols["command"].append(cmd)
             n += 1
-            s = step(world, s, cmd)
-            if s.collided[0] or s.reached[0] or s.t[0] >= sim.time_limit - 1e-9:
+            new = step(world, s, cmd)
+            event = int(classify(s, new, sim.time_limit)[0])
+            s = new
+            if event != Event.NONE:
                 break
-        events.append(COLLISION if s.collided[0] else SUCCESS if s.reached[0] else TIMEOUT)
+        events.append(event)
         episode.append(np.full(n, e, dtype=np.int64))
     return BCData(
         **{k: np.concatenate(v) for k, v in cols.items()},

@@ -11,20 +11,8 @@ Environments
     or at the time limit (30 s); every end is terminal for the returns, as in the original
     (the time is not observed, so the timeout is not bootstrapped).
 
-Reward (:func:`crowdnav_reward`; the original's unicycle terms, REFERENCES)
-
-    r = +10                                  on success
-        −20                                  on collision (a human or a wall)
-        (d − 0.25) · 10 · Δt                 else if the clearance d < 0.25 m
-        3 (‖g − p_{t−1}‖ − ‖g − p_t‖)        otherwise (potential: decrease of goal distance)
-      + min_{i,k} −20 / 2^(k+1) · [‖p_t − p̂_i(k)‖ < r_r + r_i]   intrusion into the CV-predicted
-                                             positions k = 1..5 (Δt_pred = 0.25 s) of human i
-      − 4.5 Δθ²                               spin: Δθ = ω Δt, the heading change of the step
-      − 2 |v| if v < 0                        reversing (inert here: our v_min = 0)
-
-    d is the swept clearance over the step (``State.clearance``) and Δt our 0.1 s; the
-    intrusion term is charged on non-terminal steps. The environment's own reward
-    (``NavEnv``) is a shorter shaping; this one is computed here from the state.
+Reward: :func:`pioneer.reward.crowdnav.crowdnav_reward` (the original's unicycle terms, also
+the Gymnasium environments' reward).
 
 PPO (Schulman et al. 2017) with GAE, clip 0.2, 5 epochs, 2 minibatches, 30-step rollouts per
 environment, value-loss weight 0.5, gradient norm ≤ 0.5, Adam (ε = 1e−5) — the original's
@@ -96,15 +84,15 @@ from pioneer.baselines.crowdnav.observation import (
 from pioneer.config import Config, check_nonnegative, check_positive
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, write_text_atomic
+from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
+from pioneer.sim.events import Event
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
-from pioneer.sim.world import State, World, step
+from pioneer.sim.world import State, step
 
 __all__ = [
     "CURVE_COLUMNS",
     "PPOConfig",
-    "RewardConfig",
     "compute_gae",
-    "crowdnav_reward",
     "train_crowdnav",
 ]
 
@@ -119,22 +107,7 @@ CURVE_COLUMNS = (
     "timeout_rate",
     "wall_time_s",
 )
-NONE, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
 F64 = NDArray[np.float64]
-
-
-@dataclasses.dataclass(frozen=True)
-class RewardConfig(Config):
-    """CrowdNav++ reward terms (unicycle values of the original)."""
-
-    success: float = 10.0  # on reaching the goal
-    collision: float = -20.0  # on a collision (humans or walls)
-    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
-    discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt  [1/(m·s)]
-    potential: float = 3.0  # × decrease of goal distance [1/m]
-    intrusion: float = -20.0  # / 2^(k+1) for predicted step k = 1..n_pred
-    spin: float = -4.5  # × Δθ² [1/rad²], Δθ the heading change of the step
-    reverse: float = -2.0  # × |v| when v < 0 [s/m]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,48 +178,6 @@ class PPOConfig(Config):
 
 
 # ------------------------------------------------------------------------------ reward, GAE
-def crowdnav_reward(
-    world: World,
-    prev: State,
-    new: State,
-    config: RewardConfig,
-    n_pred: int = 5,
-    pred_dt: float = 0.25,
-) -> tuple[F64, NDArray[np.int8]]:
-    """Per-copy reward ``(B,)`` and event code ``(B,)`` (0 none, 1 success, 2 collision,
-    3 timeout) of the step ``prev → new`` (formula in the module docstring)."""
-    rc = config
-    sim = world.sim
-    dt = sim.dt
-    collided = new.collided & ~prev.collided
-    reached = new.reached & ~prev.reached & ~collided
-    timeout = ~(collided | reached) & (new.t >= sim.time_limit - 1e-9)
-    event = np.where(
-        collided, COLLISION, np.where(reached, SUCCESS, np.where(timeout, TIMEOUT, NONE))
-    ).astype(np.int8)
-    d0 = np.linalg.norm(prev.goal - prev.robot[:, :2], axis=1)
-    d1 = np.linalg.norm(new.goal - new.robot[:, :2], axis=1)
-    c = new.clearance
-    base = np.where(
-        c < rc.discomfort_distance,
-        (c - rc.discomfort_distance) * rc.discomfort_scale * dt,
-        rc.potential * (d0 - d1),
-    )
-    r = np.where(collided, rc.collision, np.where(reached, rc.success, base))
-    # Intrusion into the constant-velocity predictions of the humans, k = 1..n_pred.
-    if new.n_humans:
-        ks = np.arange(1, n_pred + 1) * pred_dt
-        pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
-        dist = np.linalg.norm(pred - new.robot[:, None, None, :2], axis=-1)  # (B, N, K)
-        hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
-        pen = rc.intrusion / 2.0 ** (np.arange(1, n_pred + 1) + 1)  # (K,)
-        intr = np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2))
-        r = r + np.where(collided | reached, 0.0, intr)
-    v, w = new.command[:, 0], new.command[:, 1]
-    r = r + rc.spin * (w * dt) ** 2 + np.where(v < 0.0, rc.reverse * np.abs(v), 0.0)
-    return r, event
-
-
 def compute_gae(
     rewards: F64, values: F64, dones: F64, last_value: F64, gamma: float, lam: float
 ) -> tuple[F64, F64]:
@@ -269,12 +200,7 @@ def compute_gae(
 
 
 # ------------------------------------------------------------------------------ state helpers
-def _state_fields() -> list[str]:
-    return [f.name for f in dataclasses.fields(State)]
-
-
-def _stack_states(states: list[State]) -> State:
-    return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in _state_fields()})
+_STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
 
 
 def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -287,11 +213,6 @@ def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _put(batch: State, b: int, single: State) -> None:
-    for k in _state_fields():
-        getattr(batch, k)[b] = getattr(single, k)[0]
-
-
 # ------------------------------------------------------------------------------ the trainer
 class _Trainer:
     """Everything that changes during training (saved whole in the checkpoint)."""
@@ -301,7 +222,7 @@ class _Trainer:
         scenario: ScenarioConfig,
         ppo: PPOConfig,
         net: CrowdNavConfig,
-        reward: RewardConfig,
+        reward: CrowdNavRewardConfig,
         warm: WarmStartConfig | None = None,
     ) -> None:
         self.scenario, self.ppo, self.net_cfg, self.reward_cfg = scenario, ppo, net, reward
@@ -317,7 +238,7 @@ class _Trainer:
         self.rng = np.random.default_rng(np.random.SeedSequence([ppo.seed, 0x0C20D]))
         self.gen = torch.Generator().manual_seed(ppo.seed + 1)
         b = ppo.n_envs
-        self.state = _stack_states([self._sample() for _ in range(b)])
+        self.state = State.concat([self._sample() for _ in range(b)])
         self.h = self.model.initial_state(b)
         self.start = np.ones(b, dtype=np.bool_)  # the hidden state is reset before this step
         self.ep_return = np.zeros(b)
@@ -370,22 +291,15 @@ class _Trainer:
                     action.numpy(), self.state.command[:, 0], sim.robot, sim.dt, self.net_cfg
                 )
                 new = step(self.world, self.state, cmd)
-                r, event = crowdnav_reward(
-                    self.world,
-                    self.state,
-                    new,
-                    self.reward_cfg,
-                    self.net_cfg.n_pred,
-                    self.net_cfg.pred_dt,
-                )
+                r, event = crowdnav_reward(self.world, self.state, new, self.reward_cfg)
                 rewards[t] = r
-                done = event != NONE
+                done = event != Event.NONE
                 dones[t] = done
                 self.ep_return += r
                 for i in np.flatnonzero(done):
                     self._finish(float(self.ep_return[i]), int(event[i]))
                     self.ep_return[i] = 0.0
-                    _put(new, int(i), self._sample())
+                    new.put(int(i), self._sample())
                 self.state, self.h, self.start = new, h, done
             obs = build_observation(self.state, self.world, self.net_cfg)
             _, _, last_value = self._policy_step(obs)
@@ -476,9 +390,9 @@ class _Trainer:
             float(self.env_steps),
             float(self.episodes),
             float(np.mean(self.win_return)) if self.win_return else math.nan,
-            rate(SUCCESS),
-            rate(COLLISION),
-            rate(TIMEOUT),
+            rate(Event.SUCCESS),
+            rate(Event.COLLISION),
+            rate(Event.TIMEOUT),
             self.wall,
         ]
         self.curve.append(row)
@@ -516,7 +430,7 @@ class _Trainer:
         for i, st in cosd["state"].items():
             for k, v in st.items():
                 tensors[f"critic_optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
-        for k in _state_fields():
+        for k in _STATE_FIELDS:
             tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
         tensors["train/h"] = self.h.clone().contiguous()
         tensors["train/start"] = torch.from_numpy(self.start.copy())
@@ -590,7 +504,7 @@ class _Trainer:
                     _, i, name = k.split("/")
                     cosd["state"].setdefault(int(i), {})[name] = v
             self.critic_opt.load_state_dict(cosd)
-        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _state_fields()})
+        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _STATE_FIELDS})
         self.h = t["train/h"].clone()
         self.start = t["train/start"].numpy().copy()
         self.ep_return = t["train/ep_return"].numpy().copy()
@@ -636,7 +550,7 @@ def train_crowdnav(
     out_dir: str | Path,
     ppo: PPOConfig | None = None,
     net: CrowdNavConfig | None = None,
-    reward: RewardConfig | None = None,
+    reward: CrowdNavRewardConfig | None = None,
     warm: WarmStartConfig | None = None,
     resume: bool | None = None,
     progress: bool = True,
@@ -666,7 +580,7 @@ def train_crowdnav(
     # One spatial-edge slot per human of the scenario unless configured otherwise.
     net = net or CrowdNavConfig(max_humans=max(1, len(sc.humans)))
     warm = warm or WarmStartConfig()
-    tr = _Trainer(sc, ppo, net, reward or RewardConfig(), warm)
+    tr = _Trainer(sc, ppo, net, reward or CrowdNavRewardConfig(), warm)
     resumed_from = None
     bc_info: dict[str, Any] | None = None
     if ckpt.is_file():

@@ -12,9 +12,10 @@ from gymnasium.utils.env_checker import check_env, data_equivalence
 import pioneer  # noqa: F401  (registers the environment ids)
 from pioneer.baselines.classic import GoalPolicy
 from pioneer.control import make_policy, policy_names
-from pioneer.envs.env import ENV_IDS, NavEnv, RewardConfig
+from pioneer.envs.env import ENV_IDS, NavEnv
 from pioneer.errors import CommandError, ConfigError
 from pioneer.eval import run_episode
+from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
 from pioneer.sim import GONE, get_scenario, sample_state
 from pioneer_testutils import assert_house_message
 
@@ -186,7 +187,15 @@ def test_info_contents():
     assert info["event"] is None
     assert info["time"] == 0.0
     _, reward, _, _, info = env.step([0.4, 0.0])
-    assert set(info["rewards"]) == {"success", "collision", "discomfort", "progress", "spin"}
+    assert set(info["rewards"]) == {
+        "success",
+        "collision",
+        "discomfort",
+        "progress",
+        "intrusion",
+        "spin",
+        "reverse",
+    }
     assert reward == pytest.approx(sum(info["rewards"].values()))
     assert info["time"] == pytest.approx(0.1)
     assert info["path_length"] == pytest.approx(0.04)

@@ -1,0 +1,98 @@
+"""The CrowdNav++ reward (Liu et al., ICRA 2023; unicycle terms, REFERENCES.md): the reward
+the CrowdNav++ baseline is trained on, and the Gymnasium environments' own reward.
+
+    r = +10                                  on success
+        −20                                  on collision (a human or a wall)
+        (d − 0.25) · 10 · Δt                 else if the clearance d < 0.25 m
+        3 (‖g − p_{t−1}‖ − ‖g − p_t‖)        otherwise (potential: decrease of goal distance)
+      + min_{i,k} −20 / 2^(k+1) · [‖p_t − p̂_i(k)‖ < r_r + r_i]   intrusion into the CV-predicted
+                                             positions k = 1..5 (Δt_pred = 0.25 s) of human i
+      − 4.5 Δθ²                              spin: Δθ = ω Δt, the heading change of the step
+      − 2 |v| if v < 0                       reversing (inert here: our v_min = 0)
+
+d is the swept clearance over the step (``State.clearance``) and Δt our 0.1 s; the intrusion
+term is charged on non-terminal steps. The spin term charges the heading change of the step,
+as the original's unicycle action is a rotation per step (Δθ = ω Δt); an earlier copy in the
+environment charged ω² Δt, 10× more at Δt = 0.1 s (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.config import Config
+from pioneer.sim.events import Event, classify
+from pioneer.sim.world import State, World
+
+__all__ = ["CrowdNavRewardConfig", "crowdnav_reward", "crowdnav_reward_terms"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class CrowdNavRewardConfig(Config):
+    """CrowdNav++ reward terms (unicycle values of the original)."""
+
+    success: float = 10.0  # on reaching the goal
+    collision: float = -20.0  # on a collision (humans or walls)
+    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
+    discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt  [1/(m·s)]
+    potential: float = 3.0  # × decrease of goal distance [1/m]
+    intrusion: float = -20.0  # / 2^(k+1) for predicted step k = 1..n_pred
+    spin: float = -4.5  # × Δθ² [1/rad²], Δθ the heading change of the step
+    reverse: float = -2.0  # × |v| when v < 0 [s/m]
+    n_pred: int = 5  # K, predicted positions per human
+    pred_dt: float = 0.25  # [s] Δt_pred between predicted positions
+
+
+def crowdnav_reward_terms(
+    world: World, prev: State, new: State, config: CrowdNavRewardConfig
+) -> tuple[dict[str, F64], F64, NDArray[np.int8]]:
+    """Per-term rewards ``{name: (B,)}``, their total ``(B,)`` and the event codes ``(B,)``
+    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new``."""
+    rc, sim = config, world.sim
+    dt = sim.dt
+    event = classify(prev, new, sim.time_limit)
+    collided, reached = event == Event.COLLISION, event == Event.SUCCESS
+    d0 = np.linalg.norm(prev.goal - prev.robot[:, :2], axis=1)
+    d1 = np.linalg.norm(new.goal - new.robot[:, :2], axis=1)
+    c = new.clearance
+    close = c < rc.discomfort_distance
+    ongoing = ~(collided | reached)
+    base = np.where(
+        close, (c - rc.discomfort_distance) * rc.discomfort_scale * dt, rc.potential * (d0 - d1)
+    )
+    first = np.where(collided, rc.collision, np.where(reached, rc.success, base))
+    intr = np.zeros(new.batch_size)
+    if new.n_humans:
+        ks = np.arange(1, rc.n_pred + 1) * rc.pred_dt
+        pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
+        dist = np.linalg.norm(pred - new.robot[:, None, None, :2], axis=-1)  # (B, N, K)
+        hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
+        pen = rc.intrusion / 2.0 ** (np.arange(1, rc.n_pred + 1) + 1)  # (K,)
+        intr = np.where(ongoing, np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2)), 0.0)
+    v, w = new.command[:, 0], new.command[:, 1]
+    spin = rc.spin * (w * dt) ** 2
+    rev = np.where(v < 0.0, rc.reverse * np.abs(v), 0.0)
+    total = first + intr + spin + rev
+    terms = {
+        "success": np.where(reached, rc.success, 0.0),
+        "collision": np.where(collided, rc.collision, 0.0),
+        "discomfort": np.where(ongoing & close, base, 0.0),
+        "progress": np.where(ongoing & ~close, base, 0.0),
+        "intrusion": intr,
+        "spin": spin,
+        "reverse": rev,
+    }
+    return terms, total, event
+
+
+def crowdnav_reward(
+    world: World, prev: State, new: State, config: CrowdNavRewardConfig
+) -> tuple[F64, NDArray[np.int8]]:
+    """Total reward ``(B,)`` and event codes ``(B,)`` of the step ``prev → new``."""
+    _, total, event = crowdnav_reward_terms(world, prev, new, config)
+    return total, event

@@ -1,0 +1,101 @@
+"""The native vector env: registered for make_vec, identical to Gymnasium's sync vector env."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import pioneer  # noqa: F401  (registers the environment ids)
+from pioneer.envs.env import NavEnv
+from pioneer.envs.vector import NavVectorEnv
+from pioneer.errors import ConfigError
+from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward_terms
+from pioneer.sim.events import Event, classify
+from pioneer.sim.scenarios import get_scenario, sample_state
+from pioneer.sim.world import State, step
+
+
+def test_make_vec_returns_the_native_vector_env() -> None:
+    envs = gym.make_vec(
+        "pioneer/ElevatorHRRL-v0", num_envs=4, vectorization_mode="vector_entry_point"
+    )
+    assert isinstance(envs.unwrapped, NavVectorEnv)
+    assert envs.observation_space.shape == (4, 29)
+    assert envs.action_space.shape == (4, 2)
+    envs.close()
+
+
+@pytest.mark.parametrize("scenario", ["hr-rl", "static"])
+def test_native_equals_sync_step_for_step(scenario: str) -> None:
+    """Same seeds, same actions → identical observations, rewards, flags, across autoresets."""
+    env_id = {"hr-rl": "pioneer/ElevatorHRRL-v0", "static": "pioneer/StaticStudy-v0"}[scenario]
+    n = 6
+    native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync")
+    o1, _ = native.reset(seed=11)
+    o2, _ = sync.reset(seed=11)
+    np.testing.assert_array_equal(o1, o2)
+    native.action_space.seed(3)
+    ends = 0
+    for _ in range(160):
+        a = native.action_space.sample()
+        r1 = native.step(a)
+        r2 = sync.step(a)
+        for x, y in zip(r1[:4], r2[:4], strict=True):
+            np.testing.assert_array_equal(x, y)
+        ends += int(np.sum(r1[2] | r1[3]))
+    assert ends > 0  # the comparison went through autoresets
+    native.close()
+    sync.close()
+
+
+def test_event_codes_match_the_single_env_labels() -> None:
+    envs = NavVectorEnv(num_envs=3, scenario="static")
+    envs.reset(seed=0)
+    seen: set[int] = set()
+    for _ in range(400):
+        _, _, term, trunc, info = envs.step(np.tile([0.8, 0.0], (3, 1)))
+        seen |= set(info["event"][term | trunc].tolist())
+    assert seen <= {int(Event.SUCCESS), int(Event.COLLISION), int(Event.TIMEOUT)} and seen
+
+
+def test_bad_arguments_are_refused() -> None:
+    with pytest.raises(ConfigError, match="num_envs"):
+        NavVectorEnv(num_envs=0)
+    with pytest.raises(ConfigError, match="reset"):
+        _ = NavVectorEnv(num_envs=2).state
+    with pytest.raises(ConfigError, match="seed"):
+        NavVectorEnv(num_envs=2).reset(seed=[1])
+
+
+def test_one_reward_spin_term_charges_the_heading_change() -> None:
+    """The spin term is spin · (ω Δt)² (the original's per-step rotation); the environment's
+    total equals the reward function's."""
+    cfg = get_scenario("hr-rl")
+    world = cfg.world()
+    s0 = sample_state(cfg, np.random.default_rng(0))
+    s1 = step(world, s0, np.array([[0.3, 0.5]]))
+    rc = CrowdNavRewardConfig()
+    terms, total, event = crowdnav_reward_terms(world, s0, s1, rc)
+    w = float(s1.command[0, 1])
+    assert terms["spin"][0] == pytest.approx(rc.spin * (w * cfg.sim.dt) ** 2)
+    env = NavEnv("hr-rl")
+    env.reset(options={"state": s0})
+    _, r, *_ = env.step([0.3, 0.5])
+    assert r == float(total[0])
+    assert event[0] == classify(s0, s1, cfg.sim.time_limit)[0]
+
+
+def test_classify_counts_only_this_step_and_collision_wins() -> None:
+    cfg = get_scenario("static")
+    s = State.concat([sample_state(cfg, np.random.default_rng(i)) for i in range(4)])
+    new = s.copy()
+    new.collided[:] = [True, True, False, False]
+    new.reached[:] = [True, False, True, False]
+    prev = s.copy()
+    prev.collided[1] = True  # copy 1 had already collided
+    codes = classify(prev, new, time_limit=1e9)
+    assert codes.tolist() == [Event.COLLISION, Event.NONE, Event.SUCCESS, Event.NONE]
+    new.t[:] = 1e9
+    assert classify(prev, new, time_limit=1e9).tolist()[3] == Event.TIMEOUT
