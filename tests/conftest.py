@@ -32,7 +32,7 @@ def open_world() -> object:
 def scenario_registry(monkeypatch: pytest.MonkeyPatch) -> object:
     """``pioneer.sim.scenarios`` with its registry, bases and ``PIONEER_SCENARIOS`` restored
     after the test (register variants freely; ``main()`` may extend the variable)."""
-    from pioneer.sim import scenarios as sc
+    from pioneer.sim.scenarios import registry as sc
 
     monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
     monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))

@@ -127,7 +127,7 @@ def test_the_mirror_scenario():
 
 def _obstacles_within(s, i: int, gap: float, walls: np.ndarray) -> int:
     """How many bodies and walls are within ``gap`` of human i's surface."""
-    from pioneer.sim.scenarios import _wall_distance
+    from pioneer.sim.scenarios.spec import _wall_distance
 
     p, r = s.h_pos[0, i], s.h_radius[0, i]
     n = 0
