@@ -1,0 +1,453 @@
+"""The PPO trainer of CrowdNav++: settings, GAE, rollouts on the batched simulator, updates
+and the whole training state (recipe and formulas in :mod:`pioneer.baselines.crowdnav.ppo`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from pioneer.baselines.crowdnav.imitation import WarmStartConfig
+from pioneer.baselines.crowdnav.network import CrowdNavConfig, CrowdNavNet
+from pioneer.baselines.crowdnav.observation import (
+    CrowdNavObs,
+    build_observation,
+    command_from_action,
+)
+from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import atomic_path
+from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
+from pioneer.sim.events import Event
+from pioneer.sim.scenarios import ScenarioConfig, sample_state
+from pioneer.sim.world import State, step
+
+__all__ = ["CURVE_COLUMNS", "PPOConfig", "compute_gae"]
+
+TRAIN_FORMAT = "pioneer.crowdnav-train/1"
+CURVE_COLUMNS = (
+    "update",
+    "env_steps",
+    "episodes",
+    "mean_return",
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "wall_time_s",
+)
+F64 = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig(Config):
+    """PPO settings (the original's, except ``lr``; see the module docstring)."""
+
+    total_steps: int = 2_000_000  # env steps (all environments together)
+    n_envs: int = 16  # environments stepped together
+    rollout: int = 30  # steps per environment per update
+    lr: float = 3e-4  # Adam learning rate (original: 4e-5 for 20 M steps)
+    gamma: float = 0.996  # discount per 0.1 s step (the original's 0.99 per 0.25 s step)
+    gae_lambda: float = 0.98  # GAE λ per 0.1 s step (the original's 0.95 per 0.25 s step)
+    clip: float = 0.2  # PPO ratio clip
+    epochs: int = 5  # passes over each rollout
+    minibatches: int = 2  # per epoch (split over environments)
+    value_coef: float = 0.5  # value-loss weight
+    entropy_coef: float = 0.01  # entropy bonus (original: 0; see the module docstring)
+    max_grad_norm: float = 0.5  # gradient clipping (global L2 norm)
+    adam_eps: float = 1e-5  # Adam ε
+    seed: int = 0  # seeds the weights, the action noise, the minibatches and the episodes
+    checkpoint_every: int = 50  # [updates] between checkpoints
+    window: int = 100  # finished episodes in the learning curve's running statistics
+
+    def __post_init__(self) -> None:
+        for name in (
+            "total_steps",
+            "n_envs",
+            "rollout",
+            "epochs",
+            "minibatches",
+            "checkpoint_every",
+            "window",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise ConfigError(
+                    expect(f"PPOConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
+                )
+        if self.minibatches > self.n_envs:
+            raise ConfigError(
+                expect(
+                    "PPOConfig.minibatches",
+                    f"<= n_envs ({self.n_envs})",
+                    self.minibatches,
+                    "use more environments or fewer minibatches",
+                )
+            )
+        for name in ("lr", "clip", "max_grad_norm", "adam_eps"):
+            check_positive("PPOConfig", name, getattr(self, name))
+        for name in ("value_coef", "entropy_coef"):
+            check_nonnegative("PPOConfig", name, getattr(self, name))
+        for name in ("gamma", "gae_lambda"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+                raise ConfigError(expect(f"PPOConfig.{name}", "in [0, 1]", value, "use 0.99/0.95"))
+        if not (isinstance(self.seed, int) and self.seed >= 0):
+            raise ConfigError(expect("PPOConfig.seed", "an integer >= 0", self.seed, "use 0"))
+
+    @property
+    def steps_per_update(self) -> int:
+        """Env steps per update: n_envs × rollout."""
+        return self.n_envs * self.rollout
+
+    @property
+    def updates(self) -> int:
+        """Updates needed for ``total_steps`` (rounded up)."""
+        return -(-self.total_steps // self.steps_per_update)
+
+
+# ------------------------------------------------------------------------------ reward, GAE
+def compute_gae(
+    rewards: F64, values: F64, dones: F64, last_value: F64, gamma: float, lam: float
+) -> tuple[F64, F64]:
+    """Generalised advantage estimates and returns, both ``(T, B)``.
+
+    ``rewards``, ``values`` (V(s_t)), ``dones`` (1: the episode ended with step t) are
+    ``(T, B)``; ``last_value`` is V of the state after the last step ``(B,)``.
+    δ_t = r_t + γ V_{t+1} (1 − d_t) − V_t,  A_t = δ_t + γ λ (1 − d_t) A_{t+1};  R_t = A_t + V_t.
+    """
+    t_len = rewards.shape[0]
+    adv = np.zeros_like(rewards, dtype=np.float64)
+    last = np.zeros(rewards.shape[1:], dtype=np.float64)
+    for t in range(t_len - 1, -1, -1):
+        nxt = last_value if t == t_len - 1 else values[t + 1]
+        keep = 1.0 - dones[t]
+        delta = rewards[t] + gamma * nxt * keep - values[t]
+        last = delta + gamma * lam * keep * last
+        adv[t] = last
+    return adv, adv + values
+
+
+# ------------------------------------------------------------------------------ state helpers
+_STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
+
+
+def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, Mapping):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+# ------------------------------------------------------------------------------ the trainer
+class _Trainer:
+    """Everything that changes during training (saved whole in the checkpoint)."""
+
+    def __init__(
+        self,
+        scenario: ScenarioConfig,
+        ppo: PPOConfig,
+        net: CrowdNavConfig,
+        reward: CrowdNavRewardConfig,
+        warm: WarmStartConfig | None = None,
+    ) -> None:
+        self.scenario, self.ppo, self.net_cfg, self.reward_cfg = scenario, ppo, net, reward
+        self.warm = warm or WarmStartConfig()
+        self.world = scenario.world()
+        self.model = CrowdNavNet(net, seed=ppo.seed)
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=ppo.lr, eps=ppo.adam_eps)
+        # The critic warm-up trains the critic head alone, with its own optimiser.
+        self.critic_params = [*self.model.critic.parameters(), *self.model.value_head.parameters()]
+        self.critic_opt = torch.optim.Adam(
+            self.critic_params, lr=self.warm.critic_lr, eps=ppo.adam_eps
+        )
+        self.rng = np.random.default_rng(np.random.SeedSequence([ppo.seed, 0x0C20D]))
+        self.gen = torch.Generator().manual_seed(ppo.seed + 1)
+        b = ppo.n_envs
+        self.state = State.concat([self._sample() for _ in range(b)])
+        self.h = self.model.initial_state(b)
+        self.start = np.ones(b, dtype=np.bool_)  # the hidden state is reset before this step
+        self.ep_return = np.zeros(b)
+        self.update = 0
+        self.env_steps = 0
+        self.episodes = 0
+        self.wall = 0.0
+        self.win_return: list[float] = []
+        self.win_event: list[int] = []
+        self.curve: list[list[float]] = []
+
+    def _sample(self) -> State:
+        seed = int(self.rng.integers(2**63))
+        return sample_state(self.scenario, np.random.default_rng(seed))
+
+    # -------------------------------------------------------------------- rollout
+    def _policy_step(self, obs: CrowdNavObs) -> tuple[torch.Tensor, ...]:
+        from pioneer.baselines.crowdnav.observation import obs_tensors
+
+        keep = torch.from_numpy(~self.start).to(torch.float32).unsqueeze(-1)
+        x, _, _ = self.model.encode(*obs_tensors(obs))
+        h = self.model.gru(x, self.h * keep)
+        mean, value = self.model.heads(h)
+        return h, mean, value
+
+    def rollout(self) -> dict[str, Any]:
+        """Collect ``rollout`` steps of every environment (no gradients)."""
+        ppo, t_len, b = self.ppo, self.ppo.rollout, self.ppo.n_envs
+        buf: dict[str, list[Any]] = {
+            k: [] for k in ("robot", "temporal", "spatial", "mask", "start", "action", "logp")
+        }
+        values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
+        h0 = self.h.clone()
+        std = torch.exp(self.model.log_std.detach())
+        sim = self.world.sim
+        with torch.no_grad():
+            for t in range(t_len):
+                obs = build_observation(self.state, self.world, self.net_cfg)
+                h, mean, value = self._policy_step(obs)
+                noise = torch.randn(mean.shape, generator=self.gen)
+                action = mean + std * noise
+                logp = torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
+                for k, x in zip(("robot", "temporal", "spatial", "mask"), obs, strict=True):
+                    buf[k].append(x)
+                buf["start"].append(self.start.copy())
+                buf["action"].append(action)
+                buf["logp"].append(logp)
+                values[t] = value.numpy()
+                cmd = command_from_action(
+                    action.numpy(), self.state.command[:, 0], sim.robot, sim.dt, self.net_cfg
+                )
+                new = step(self.world, self.state, cmd)
+                r, event = crowdnav_reward(self.world, self.state, new, self.reward_cfg)
+                rewards[t] = r
+                done = event != Event.NONE
+                dones[t] = done
+                self.ep_return += r
+                for i in np.flatnonzero(done):
+                    self._finish(float(self.ep_return[i]), int(event[i]))
+                    self.ep_return[i] = 0.0
+                    new.put(int(i), self._sample())
+                self.state, self.h, self.start = new, h, done
+            obs = build_observation(self.state, self.world, self.net_cfg)
+            _, _, last_value = self._policy_step(obs)
+        self.env_steps += t_len * b
+        adv, ret = compute_gae(
+            rewards, values, dones, last_value.numpy().astype(np.float64), ppo.gamma, ppo.gae_lambda
+        )
+        stacked = {k: np.stack(v) for k, v in buf.items() if k not in ("action", "logp")}
+        return {
+            **{k: torch.from_numpy(v) for k, v in stacked.items()},
+            "action": torch.stack(buf["action"]),
+            "logp": torch.stack(buf["logp"]),
+            "adv": torch.from_numpy(adv).to(torch.float32),
+            "ret": torch.from_numpy(ret).to(torch.float32),
+            "h0": h0,
+        }
+
+    def _finish(self, ret: float, event: int) -> None:
+        self.episodes += 1
+        self.win_return = [*self.win_return, ret][-self.ppo.window :]
+        self.win_event = [*self.win_event, event][-self.ppo.window :]
+
+    # -------------------------------------------------------------------- update
+    def learn(self, batch: dict[str, Any]) -> dict[str, float]:
+        """PPO epochs over the rollout (or, during the critic warm-up, value regression of the
+        critic head alone); returns mean losses."""
+        ppo, model = self.ppo, self.model
+        warmup = self.update < self.warm.critic_warmup
+        adv = batch["adv"]
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        stats = {"policy_loss": 0.0, "value_loss": 0.0, "entropy": 0.0, "n": 0.0}
+        model.train()
+        for _ in range(ppo.epochs):
+            perm = torch.randperm(ppo.n_envs, generator=self.gen)
+            for idx in torch.tensor_split(perm, ppo.minibatches):
+                x, _, _ = model.encode(
+                    batch["robot"][:, idx],
+                    batch["temporal"][:, idx],
+                    batch["spatial"][:, idx],
+                    batch["mask"][:, idx],
+                )
+                keep = (~batch["start"][:, idx]).to(torch.float32).unsqueeze(-1)
+                h = batch["h0"][idx]
+                hs = []
+                for t in range(x.shape[0]):
+                    h = model.gru(x[t], h * keep[t])
+                    hs.append(h)
+                if warmup:
+                    value = model.value_head(model.critic(torch.stack(hs).detach())).squeeze(-1)
+                    vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
+                    self.critic_opt.zero_grad(set_to_none=True)
+                    (ppo.value_coef * vl).backward()
+                    torch.nn.utils.clip_grad_norm_(self.critic_params, ppo.max_grad_norm)
+                    self.critic_opt.step()
+                    stats["value_loss"] += float(vl.detach())
+                    stats["n"] += 1
+                    continue
+                mean, value = model.heads(torch.stack(hs))
+                dist = torch.distributions.Normal(mean, torch.exp(model.log_std))
+                logp = dist.log_prob(batch["action"][:, idx]).sum(-1)
+                ratio = torch.exp(logp - batch["logp"][:, idx])
+                a = adv[:, idx]
+                pg = -torch.min(ratio * a, ratio.clamp(1 - ppo.clip, 1 + ppo.clip) * a).mean()
+                vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
+                ent = dist.entropy().sum(-1).mean()
+                loss = pg + ppo.value_coef * vl - ppo.entropy_coef * ent
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), ppo.max_grad_norm)
+                self.opt.step()
+                stats["policy_loss"] += float(pg.detach())
+                stats["value_loss"] += float(vl.detach())
+                stats["entropy"] += float(ent.detach())
+                stats["n"] += 1
+        model.eval()
+        n = stats.pop("n")
+        return {k: v / n for k, v in stats.items()}
+
+    def record(self) -> list[float]:
+        """Append this update's learning-curve row."""
+        ev = np.asarray(self.win_event)
+
+        def rate(code: int) -> float:
+            return float(np.mean(ev == code)) if ev.size else math.nan
+
+        row = [
+            float(self.update),
+            float(self.env_steps),
+            float(self.episodes),
+            float(np.mean(self.win_return)) if self.win_return else math.nan,
+            rate(Event.SUCCESS),
+            rate(Event.COLLISION),
+            rate(Event.TIMEOUT),
+            self.wall,
+        ]
+        self.curve.append(row)
+        return row
+
+    # -------------------------------------------------------------------- checkpoint
+    def settings(self) -> dict[str, Any]:
+        """What must match between a checkpoint and a resuming command."""
+        ppo = self.ppo.to_dict()
+        for k in ("total_steps", "checkpoint_every"):
+            ppo.pop(k)
+        out = {
+            "scenario": self.scenario.name,
+            "ppo": ppo,
+            "net": self.net_cfg.to_dict(),
+            "reward": self.reward_cfg.to_dict(),
+        }
+        if self.warm.active:  # absent for pure PPO: older checkpoints stay resumable
+            out["warm_start"] = self.warm.to_dict()
+        return out
+
+    def save(self, path: Path) -> None:
+        """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
+        from safetensors.torch import save
+
+        tensors: dict[str, torch.Tensor] = {
+            f"model/{k}": v.detach().clone().contiguous()
+            for k, v in self.model.state_dict().items()
+        }
+        osd = self.opt.state_dict()
+        for i, st in osd["state"].items():
+            for k, v in st.items():
+                tensors[f"optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        cosd = self.critic_opt.state_dict()
+        for i, st in cosd["state"].items():
+            for k, v in st.items():
+                tensors[f"critic_optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        for k in _STATE_FIELDS:
+            tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
+        tensors["train/h"] = self.h.clone().contiguous()
+        tensors["train/start"] = torch.from_numpy(self.start.copy())
+        tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
+        tensors["curve"] = torch.tensor(self.curve, dtype=torch.float64).reshape(
+            -1, len(CURVE_COLUMNS)
+        )
+        tensors["window/return"] = torch.tensor(self.win_return, dtype=torch.float64)
+        tensors["window/event"] = torch.tensor(self.win_event, dtype=torch.int64)
+        tensors["rng/torch"] = self.gen.get_state()
+        meta = {
+            "format": TRAIN_FORMAT,
+            "settings": json.dumps(self.settings()),
+            "param_groups": json.dumps(osd["param_groups"]),
+            "critic_param_groups": json.dumps(cosd["param_groups"]),
+            "counters": json.dumps(
+                {
+                    "update": self.update,
+                    "env_steps": self.env_steps,
+                    "episodes": self.episodes,
+                    "wall_time_s": self.wall,
+                }
+            ),
+            "rng_numpy": json.dumps(self.rng.bit_generator.state),
+            "torch": torch.__version__,
+        }
+        with atomic_path(path) as tmp:  # bytes, not save_file: that makes the file mode 0600
+            tmp.write_bytes(save(tensors, metadata=meta))
+
+    def load(self, path: Path) -> None:
+        """Restore the state written by :meth:`save` (settings must match this trainer's)."""
+        from safetensors import SafetensorError, safe_open
+
+        fix = "point --out at a new folder (the checkpoint is corrupt or of another kind)"
+        try:
+            with safe_open(str(path), framework="pt") as fh:
+                meta = dict(fh.metadata() or {})
+                t = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118
+        except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+            raise DataError(expect(f"checkpoint {path}", "a readable file", str(exc), fix)) from exc
+        if meta.get("format") != TRAIN_FORMAT:
+            raise DataError(expect(f"{path}: format", TRAIN_FORMAT, meta.get("format"), fix))
+        stored = _flat(json.loads(meta["settings"]))
+        mine = _flat(self.settings())
+        diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
+        if diff:
+            raise ConfigError(
+                expect(
+                    f"{path}: settings",
+                    "the same settings as this command (only --steps may change)",
+                    {k: stored.get(k) for k in diff},
+                    "repeat the original command (see train.json) or use a new --out",
+                )
+            )
+        self.model.load_state_dict(
+            {k[len("model/") :]: v for k, v in t.items() if k.startswith("model/")}, strict=True
+        )
+        osd: dict[str, Any] = {"state": {}, "param_groups": json.loads(meta["param_groups"])}
+        for k, v in t.items():
+            if k.startswith("optim/"):
+                _, i, name = k.split("/")
+                osd["state"].setdefault(int(i), {})[name] = v
+        self.opt.load_state_dict(osd)
+        if "critic_param_groups" in meta:
+            cosd: dict[str, Any] = {
+                "state": {},
+                "param_groups": json.loads(meta["critic_param_groups"]),
+            }
+            for k, v in t.items():
+                if k.startswith("critic_optim/"):
+                    _, i, name = k.split("/")
+                    cosd["state"].setdefault(int(i), {})[name] = v
+            self.critic_opt.load_state_dict(cosd)
+        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _STATE_FIELDS})
+        self.h = t["train/h"].clone()
+        self.start = t["train/start"].numpy().copy()
+        self.ep_return = t["train/ep_return"].numpy().copy()
+        self.curve = t["curve"].tolist()
+        self.win_return = t["window/return"].tolist()
+        self.win_event = [int(x) for x in t["window/event"].tolist()]
+        self.gen.set_state(t["rng/torch"])
+        self.rng.bit_generator.state = json.loads(meta["rng_numpy"])
+        c = json.loads(meta["counters"])
+        self.update, self.env_steps = int(c["update"]), int(c["env_steps"])
+        self.episodes, self.wall = int(c["episodes"]), float(c["wall_time_s"])
