@@ -58,17 +58,9 @@ def negative_frames(frames: list[Frame], dt: float, window: float = NEGATIVE_WIN
     return [f for f in frames if f["time"] >= t_end - window - 1e-9]
 
 
-def generate(
-    scenario: str,
-    n_positive: int | None = None,
-    n_negative: int | None = None,
-    seed: int = 0,
-    progress: bool = True,
-    command: str = "",
-) -> Dataset:
-    """A dataset of ``n_positive`` γ = +1 and ``n_negative`` γ = −1 samples for ``scenario``."""
-    cfg = get_scenario(scenario)
-    pos_default, neg_default = DEFAULT_SIZES.get(cfg.name, (700, 180))
+def _sample_counts(name: str, n_positive: int | None, n_negative: int | None) -> tuple[int, int]:
+    """The requested counts, or the scenario's defaults (the paper's); checked."""
+    pos_default, neg_default = DEFAULT_SIZES.get(name, (700, 180))
     n_pos = pos_default if n_positive is None else n_positive
     n_neg = neg_default if n_negative is None else n_negative
     if n_pos < 0 or n_neg < 0 or n_pos + n_neg == 0:
@@ -80,6 +72,20 @@ def generate(
                 "fix the counts",
             )
         )
+    return n_pos, n_neg
+
+
+def generate(
+    scenario: str,
+    n_positive: int | None = None,
+    n_negative: int | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    command: str = "",
+) -> Dataset:
+    """A dataset of ``n_positive`` γ = +1 and ``n_negative`` γ = −1 samples for ``scenario``."""
+    cfg = get_scenario(scenario)
+    n_pos, n_neg = _sample_counts(cfg.name, n_positive, n_negative)
     env = NavEnv(cfg)
     dt = cfg.sim.dt
     static = cfg.name == "static"

@@ -110,6 +110,61 @@ def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool
         write_text_atomic(out / "train.json", json.dumps(dict(info), indent=2) + "\n")
 
 
+def _check_resume(resume: bool | None, ckpt: Path, out: Path) -> None:
+    """``--resume`` needs a checkpoint; a fresh start (``resume=False``) refuses one."""
+    if resume is True and not ckpt.is_file():
+        raise ConfigError(
+            expect("--resume", f"a checkpoint at {ckpt}", "none", "drop --resume to start afresh")
+        )
+    if resume is False and ckpt.is_file():
+        raise ConfigError(
+            expect("--out", "a folder without a checkpoint", str(out), "resume or use a new --out")
+        )
+
+
+def _train_loop(
+    tr: _Trainer,
+    out: Path,
+    info: Callable[[], dict[str, Any]],
+    progress: bool,
+    on_update: Callable[[dict[str, float]], None] | None,
+) -> None:
+    """PPO updates until the budget, with a progress bar and periodic checkpoints."""
+    ppo = tr.ppo
+    sc = tr.scenario
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=ppo.updates * ppo.steps_per_update,
+        initial=tr.env_steps,
+        unit="step",
+        desc=f"crowdnav++ {sc.name}",
+        disable=not progress,
+        mininterval=2.0,
+    )
+    t_start, s_start = time.perf_counter(), tr.env_steps
+    try:
+        while tr.update < ppo.updates:
+            t0 = time.perf_counter()
+            batch = tr.rollout()
+            stats = tr.learn(batch)
+            tr.update += 1
+            tr.wall += time.perf_counter() - t0
+            row = tr.record()
+            rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
+            bar.update(ppo.steps_per_update)
+            bar.set_postfix(
+                {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
+                refresh=False,
+            )
+            if on_update is not None:
+                on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
+            if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
+                _write_outputs(tr, out, info(), final=False)
+    finally:
+        bar.close()
+
+
 def train_crowdnav(
     scenario: str,
     out_dir: str | Path,
@@ -132,14 +187,7 @@ def train_crowdnav(
     sc = get_scenario(scenario)
     out = Path(out_dir)
     ckpt = out / "checkpoint.safetensors"
-    if resume is True and not ckpt.is_file():
-        raise ConfigError(
-            expect("--resume", f"a checkpoint at {ckpt}", "none", "drop --resume to start afresh")
-        )
-    if resume is False and ckpt.is_file():
-        raise ConfigError(
-            expect("--out", "a folder without a checkpoint", str(out), "resume or use a new --out")
-        )
+    _check_resume(resume, ckpt, out)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
     # One spatial-edge slot per human of the scenario unless configured otherwise.
@@ -186,37 +234,8 @@ def train_crowdnav(
             ),
         }
 
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=ppo.updates * ppo.steps_per_update,
-        initial=tr.env_steps,
-        unit="step",
-        desc=f"crowdnav++ {sc.name}",
-        disable=not progress,
-        mininterval=2.0,
-    )
     t_start, s_start = time.perf_counter(), tr.env_steps
-    try:
-        while tr.update < ppo.updates:
-            t0 = time.perf_counter()
-            batch = tr.rollout()
-            stats = tr.learn(batch)
-            tr.update += 1
-            tr.wall += time.perf_counter() - t0
-            row = tr.record()
-            rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
-            bar.update(ppo.steps_per_update)
-            bar.set_postfix(
-                {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
-                refresh=False,
-            )
-            if on_update is not None:
-                on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
-            if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
-                _write_outputs(tr, out, info(), final=False)
-    finally:
-        bar.close()
+    _train_loop(tr, out, info, progress, on_update)
     summary = info()
     summary["steps_per_s_this_run"] = (tr.env_steps - s_start) / max(
         time.perf_counter() - t_start, 1e-9
