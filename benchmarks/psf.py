@@ -97,7 +97,9 @@ def _psf_scene(state: State, walls: np.ndarray) -> tuple[np.ndarray, list[tuple[
     return psf_state, obstacles
 
 
-def _time_against_pioneer(psf: Any, cfg: Path, n: int, repeats: int, info: dict[str, Any]) -> Any:
+def _time_against_pioneer(
+    psf: Any, cfg: Path, n: int, repeats: int, info: dict[str, Any]
+) -> dict[str, np.ndarray]:
     """Seconds per ``n`` steps of pysocialforce, our raw env and our ``world.step`` (B = 1),
     round-robin; what pysocialforce's last run did goes into ``info``."""
     scenario, world, state = elevator_setup(SEED + 2)

@@ -1,0 +1,158 @@
+"""Deciding: the density reward (``density_fit``, ``density_eval``), one lookahead-teacher
+decision and its pieces (``teacher_decision``), and CVaR-BF over episodes
+(``cvar_bf_decision``); :func:`episode_decision_times` also serves CrowdNav++ (learn.py)."""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from benchmarks.common import SCENARIO, SEED, Case, Plan, Result, elevator_setup, metric, time_cases
+from pioneer.control.policy import Policy
+
+
+def _density_data(n: int, d: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Synthetic demos: features ~ N(0, I) in R^d, 80 % positive."""
+    rng = np.random.default_rng(seed)
+    return rng.normal(size=(n, d)), np.where(rng.random(n) < 0.8, 1.0, -1.0)
+
+
+def bench_density_fit(plan: Plan) -> Result:
+    """``DensityReward.fit`` on 1,000 samples (all inducing) and on 20,000 with 2,000 inducing."""
+    from pioneer.reward import DensityConfig, DensityReward
+
+    small = _density_data(1000, 31, SEED + 20)
+    large = _density_data(20000, 31, SEED + 21)
+    cases = {
+        "fit_1000": Case(lambda _: DensityReward().fit(*small)),
+        "fit_20000_2000": Case(
+            lambda _: DensityReward(DensityConfig(max_inducing=2000)).fit(*large)
+        ),
+    }
+    secs = time_cases({"fit_1000": cases["fit_1000"]}, plan.fit_repeats, warmup=1)
+    secs |= time_cases(
+        {"fit_20000_2000": cases["fit_20000_2000"]}, plan.fit_large_repeats, warmup=0
+    )
+    return {
+        "metrics": {
+            "s_fit_1000": metric(secs["fit_1000"], "s", ("<=", 0.5)),
+            "s_fit_20000_2000_inducing": metric(secs["fit_20000_2000"], "s", ("<=", 10.0)),
+        },
+        "info": {"features": 31, "inducing_selection": "kmeans medoids"},
+    }
+
+
+def bench_density_eval(plan: Plan) -> Result:
+    """Evaluate 1,200 queries (a teacher's 120 × 10 rollout states) against 1,000 inducing."""
+    from pioneer.reward import DensityReward
+
+    model = DensityReward().fit(*_density_data(1000, 31, SEED + 22))
+    q = _density_data(1200, 31, SEED + 23)[0]
+    model(q)
+    secs = time_cases({"eval": Case(lambda _: model(q))}, plan.batch_repeats, warmup=3)["eval"]
+    return {
+        "metrics": {"ms_eval_1200x1000": metric(secs * 1e3, "ms", ("<=", 2.0))},
+        "info": {"queries": 1200, "inducing": 1000, "dtype": "float32 evaluation"},
+    }
+
+
+def bench_teacher_decision(plan: Plan) -> Result:
+    """One teacher decision (120 candidates × 10 states: world step, rays, density, scoring),
+    and the same pieces alone, to show where the time goes."""
+    from pioneer.control.rollout import rollout
+    from pioneer.control.teacher import make_teacher
+    from pioneer.reward.features import feature_map
+
+    _, world, state = elevator_setup(SEED + 30)
+    teacher = make_teacher(SCENARIO)
+    teacher.decide(world, state)
+    ro = rollout(world, state, teacher.candidates)
+    c, n_l = ro.robot.shape[:2]
+    feats = feature_map("obs_action").from_arrays(
+        ro.robot[:, :, :2].reshape(c * n_l, 2),
+        ro.obs.reshape(c * n_l, -1),
+        np.repeat(ro.commands, n_l, axis=0),
+    )
+    assert teacher.density is not None
+    density = teacher.density
+    cases = {
+        "decision": Case(lambda _: teacher.decide(world, state)),
+        "rollout": Case(lambda _: rollout(world, state, teacher.candidates)),
+        "density": Case(lambda _: density(feats)),
+    }
+    secs = time_cases(cases, plan.batch_repeats, warmup=3)
+    inducing = int(density.alpha_.shape[0])  # type: ignore[union-attr]
+    flops = 2 * feats.shape[0] * inducing * feats.shape[1]
+    return {
+        "metrics": {
+            "ms_decision": metric(secs["decision"] * 1e3, "ms", ("<=", 10.0)),
+            "ms_rollout_120x10": metric(secs["rollout"] * 1e3, "ms"),
+            "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
+        },
+        "info": {
+            "candidates": int(teacher.candidates.shape[0]),
+            "inducing": inducing,
+            "density_matmul_mflop": flops / 1e6,
+            "blas_threads": "1 (threadpoolctl, as the CLI and workers run)",
+        },
+    }
+
+
+class _TimedPolicy:
+    """A policy that records the seconds of every ``act`` of the policy it wraps, after
+    ``warmup`` untimed calls on an episode's first observation and a fresh ``reset``."""
+
+    def __init__(self, inner: Policy, times: list[float], warmup: int) -> None:
+        self.inner, self.times, self.warmup = inner, times, warmup
+        self.name = inner.name
+        self._reset_args: tuple[Mapping[str, Any], np.random.Generator] | None = None
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        self._reset_args = (info, copy.deepcopy(rng))
+        self.inner.reset(info, rng)
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        if self._reset_args is not None and self.warmup:
+            for _ in range(self.warmup):  # first calls allocate
+                self.inner.act(obs, info)
+            self.inner.reset(*self._reset_args)
+        self._reset_args = None
+        t0 = time.perf_counter()
+        u = self.inner.act(obs, info)
+        self.times.append(time.perf_counter() - t0)
+        return u
+
+
+def episode_decision_times(
+    policy_for: Callable[[int], Policy], episodes: int, seed0: int, warmup: int = 0
+) -> np.ndarray:
+    """Seconds per ``policy.act`` over the states of ``episodes`` seeded HR-RL episodes run by
+    :func:`pioneer.eval.episode.run_episode`; ``policy_for(ep)`` gives the policy of episode
+    ``ep``, ``warmup`` untimed calls first."""
+    from pioneer.eval.episode import run_episode
+
+    times: list[float] = []
+    for ep in range(episodes):
+        run_episode(SCENARIO, _TimedPolicy(policy_for(ep), times, warmup), seed0 + ep)
+    return np.asarray(times)
+
+
+def bench_cvar_bf_decision(plan: Plan) -> Result:
+    """CVaR-BF decision time over the states of seeded HR-RL episodes (as the original paper
+    reports its solver time), next to the teacher's."""
+    from pioneer.control.registry import build_policy
+
+    secs = episode_decision_times(
+        lambda _: build_policy("cvar-bf", SCENARIO), plan.cvar_episodes, SEED + 40
+    )
+    return {
+        "metrics": {
+            "ms_decision": metric(secs * 1e3, "ms", ("<=", 20.0)),
+            "ms_decision_p90": metric([float(np.percentile(secs, 90) * 1e3)], "ms"),
+        },
+        "info": {"decisions": int(secs.size), "episodes": plan.cvar_episodes},
+    }

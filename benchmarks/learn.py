@@ -1,0 +1,216 @@
+"""Learned policies: the student's decision through ONNX Runtime and PyTorch next to the
+teacher's (``student_decision``), a full DAgger run (``dagger_run``, opt-in), and CrowdNav++'s
+decision time and PPO training throughput (``crowdnav_decision``,
+``crowdnav_train_throughput``)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.common import (
+    REPO,
+    SCENARIO,
+    SEED,
+    Case,
+    Plan,
+    Result,
+    Target,
+    elevator_setup,
+    metric,
+    mode,
+    time_cases,
+)
+from benchmarks.control import episode_decision_times
+from pioneer.sim import get_scenario, observe
+
+
+def scan_360(seed: int) -> tuple[np.ndarray, float, float, float]:
+    """A synthetic 360-beam laser scan (1° steps, range_max 10 m, a few ``inf`` returns)."""
+    rng = np.random.default_rng(seed)
+    ranges = rng.uniform(0.4, 6.0, size=360)
+    ranges[rng.random(360) < 0.05] = np.inf
+    return ranges, -math.pi, 2 * math.pi / 360, 10.0
+
+
+def bench_student_decision(plan: Plan) -> Result:
+    """Student decision (batch 1): scan → command through ONNX Runtime (the deploy runtime,
+    resampling included), observation → command through PyTorch (uncertainty included), and
+    the teacher's decision timed apart, for the teacher/student ratio. Weights do not change
+    the cost, so a freshly initialised MDN of the SPEC architecture is timed."""
+    import torch
+
+    from pioneer.control.teacher import make_teacher
+    from pioneer.deploy import StudentRuntime
+    from pioneer.learn import build_student, export_onnx
+    from pioneer.learn.policy import StudentPolicy
+
+    torch.set_num_threads(1)
+    model = build_student(seed=SEED + 50)
+    policy = StudentPolicy(model)
+    _, world, state = elevator_setup(SEED + 51)
+    obs = observe(world, state)[0]
+    teacher = make_teacher(SCENARIO)
+    ranges, amin, inc, rmax = scan_360(SEED + 52)
+    goal = np.array([2.0, 0.5])
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-onnx-") as tmp:
+        runtime = StudentRuntime(export_onnx(model, Path(tmp) / "student.onnx"))
+        # The students round-robin with each other; the teacher apart (its 1,200 rollout
+        # states flush the caches, which would time a cold student, not a 10 Hz loop's).
+        cases = {
+            "onnx_scan": Case(lambda _: runtime.step(ranges, amin, inc, rmax, goal)),
+            "torch_obs": Case(lambda _: policy.act(obs, {})),
+        }
+        secs = time_cases(cases, 10 * plan.batch_repeats, warmup=20)
+        secs["teacher"] = time_cases(
+            {"teacher": Case(lambda _: teacher.decide(world, state))}, plan.batch_repeats, 3
+        )["teacher"]
+    onnx_ms, torch_ms, teacher_ms = (
+        float(np.median(secs[k])) * 1e3 for k in ("onnx_scan", "torch_obs", "teacher")
+    )
+    return {
+        "metrics": {
+            "ms_onnx_scan_to_command": metric(secs["onnx_scan"] * 1e3, "ms", ("<=", 0.2)),
+            "ms_torch_obs_to_command": metric(secs["torch_obs"] * 1e3, "ms", ("<=", 1.0)),
+            "ms_teacher_decision": metric(secs["teacher"] * 1e3, "ms"),
+            "teacher_over_student_onnx": metric([teacher_ms / onnx_ms], "x"),
+            "teacher_over_student_torch": metric([teacher_ms / torch_ms], "x"),
+        },
+        "info": {"scan_beams": 360, "threads": 1, "model": "MDN 29-128-128-K10"},
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# dagger_run
+
+
+def _checkpoint_contents(path: Path) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """Config, info and tensors of a student checkpoint, read by the project's reader
+    (:func:`pioneer.learn.load_student`, :func:`pioneer.learn.read_checkpoint_meta`). Configs
+    come with their defaults filled in, so an option added later (default = the old behaviour)
+    does not make a checkpoint written before it look different."""
+    from pioneer.learn import load_student, read_checkpoint_meta
+    from pioneer.learn.dagger import DaggerConfig
+
+    model = load_student(path)
+    info = read_checkpoint_meta(path)["info"]
+    if isinstance(info, dict) and "dagger" in info:
+        info["dagger"] = DaggerConfig.from_dict(info["dagger"]).to_dict()
+    return model.config.to_dict(), info, dict(model.state_dict())
+
+
+def same_checkpoint(a: Path, b: Path) -> bool:
+    """Equal tensors, config and info (where and with which torch it was made aside)."""
+    import torch
+
+    cfg_a, info_a, ta = _checkpoint_contents(a)
+    cfg_b, info_b, tb = _checkpoint_contents(b)
+    if (cfg_a, info_a) != (cfg_b, info_b) or ta.keys() != tb.keys():
+        return False
+    return all(torch.equal(ta[k], tb[k]) for k in ta)
+
+
+def _torch_cpu_capability(checkpoint: Path) -> str:
+    """torch's kernel family (e.g. "AVX2") where ``checkpoint`` was written (its metadata)."""
+    from safetensors import safe_open
+
+    with safe_open(str(checkpoint), framework="numpy") as f:
+        return str((f.metadata() or {}).get("torch_cpu_capability", "unknown"))
+
+
+def bench_dagger_run(plan: Plan) -> Result:
+    """Wall time of a full DAgger run (50 + 10 × 50 episodes, HR-RL, MDN, 2 workers) through
+    the CLI. Opt-in (``--only dagger_run``): it takes minutes."""
+    with tempfile.TemporaryDirectory(prefix="pioneer-bench-dagger-") as tmp:
+        out = Path(tmp) / "dagger"
+        cmd = [sys.executable, "-m", "pioneer.cli", "distill", "--scenario", SCENARIO]
+        t0 = time.perf_counter()
+        proc = subprocess.run(
+            [*cmd, "--out", str(out), "--workers", "2"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise RuntimeError(f"distill failed: {proc.stderr[-2000:]}")
+        curves = (out / "curves.csv").read_text().splitlines()
+        fresh = out / "student.safetensors"
+        shipped = REPO / "src" / "pioneer" / "data" / "students" / f"{SCENARIO}-mdn.safetensors"
+        same = same_checkpoint(fresh, shipped)
+        capability = _torch_cpu_capability(fresh)
+    return {
+        "metrics": {"minutes_full_run": metric([wall / 60], "min", ("<=", 15.0))},
+        "info": {
+            "episodes": 550,
+            "workers": 2,
+            "last_round": curves[-1],
+            # the shipped student was made by this very command: a fresh run matches it bit for
+            # bit on a CPU where torch picks the same kernels (compare the two capabilities)
+            "same_weights_as_shipped": same,
+            "torch_cpu_capability": capability,
+        },
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# CrowdNav++
+
+
+def bench_crowdnav_decision(plan: Plan) -> Result:
+    """CrowdNav++ ``policy.act`` (graph observation from the privileged state, attention, GRU
+    step, increments → command) over the states of seeded HR-RL episodes, shipped weights,
+    one torch thread."""
+    from pioneer.control.registry import build_policy
+
+    policy = build_policy("crowdnav++", SCENARIO)  # sets torch to 1 thread
+    # the same episode count as CVaR-BF's benchmark
+    secs = episode_decision_times(lambda _: policy, plan.cvar_episodes, SEED + 70, warmup=5)
+    return {
+        "metrics": {
+            "ms_decision": metric(secs * 1e3, "ms", ("<=", 1.0)),
+            "ms_decision_p90": metric([float(np.percentile(secs, 90) * 1e3)], "ms"),
+        },
+        "info": {"decisions": int(secs.size), "episodes": plan.cvar_episodes, "threads": 1},
+    }
+
+
+def bench_crowdnav_train_throughput(plan: Plan) -> Result:
+    """Environment steps/s of the CrowdNav++ PPO trainer (rollout + update, HR-RL, one torch
+    thread), per update after a warm-up one, with 16 (the original's), 32 and 64 environments."""
+    import torch
+
+    from pioneer.baselines.crowdnav.network import CrowdNavConfig
+    from pioneer.baselines.crowdnav.ppo import PPOConfig, _Trainer
+    from pioneer.reward.crowdnav import CrowdNavRewardConfig
+
+    torch.set_num_threads(1)
+    metrics: dict[str, Any] = {}
+    n_updates = 3 if mode(plan) == "quick" else 8
+    targets: dict[int, Target | None] = {16: None, 32: (">=", 2000.0), 64: None}
+    for n_envs, target in targets.items():
+        tr = _Trainer(
+            get_scenario(SCENARIO),
+            PPOConfig(n_envs=n_envs, seed=SEED % 1000),
+            CrowdNavConfig(max_humans=3),
+            CrowdNavRewardConfig(),
+        )
+        tr.learn(tr.rollout())
+        rates = []
+        for _ in range(n_updates):
+            t0 = time.perf_counter()
+            tr.learn(tr.rollout())
+            rates.append(tr.ppo.steps_per_update / (time.perf_counter() - t0))
+        metrics[f"steps_per_s_{n_envs}_envs"] = metric(rates, "steps/s", target)
+    return {
+        "metrics": metrics,
+        "info": {"rollout": 30, "epochs": 5, "minibatches": 2, "threads": 1, "updates": n_updates},
+    }
