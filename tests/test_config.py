@@ -9,7 +9,6 @@ import math
 import pytest
 
 from pioneer.config import Config, check_nonnegative, check_positive, check_range
-from pioneer.envs.env import RewardConfig
 from pioneer.errors import (
     CommandError,
     ConfigError,
@@ -18,6 +17,7 @@ from pioneer.errors import (
     ScenarioError,
     expect,
 )
+from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
 from pioneer.sim import ElevatorLayout, LidarConfig, RobotConfig, SimConfig, SocialForceConfig
 from pioneer_testutils import assert_house_message
 

@@ -27,17 +27,19 @@ from pioneer.sim.world import State, World, observe, step
 __all__ = ["ENV_IDS", "NavEnv", "register_envs", "spaces"]
 
 
-def spaces(scenario: ScenarioConfig) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+def spaces(
+    scenario: ScenarioConfig,
+) -> tuple[gym.spaces.Space[NDArray[np.float32]], gym.spaces.Space[NDArray[np.float32]]]:
     """Observation ``Box(29,)`` (SPEC 1.4) and action ``Box(2,)`` (v, ω) of one copy."""
     sim = scenario.sim
     lid = sim.lidar
     n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1
-    observation = gym.spaces.Box(
+    observation: gym.spaces.Space[NDArray[np.float32]] = gym.spaces.Box(
         low=np.array([0.0] * n_dist + [-math.pi] * n_ang, dtype=np.float32),
         high=np.array([lid.max_range] * n_dist + [math.pi] * n_ang, dtype=np.float32),
         dtype=np.float32,
     )
-    action = gym.spaces.Box(
+    action: gym.spaces.Space[NDArray[np.float32]] = gym.spaces.Box(
         low=sim.robot.command_low.astype(np.float32),
         high=sim.robot.command_high.astype(np.float32),
         dtype=np.float32,

@@ -39,7 +39,7 @@ __all__ = ["NavVectorEnv"]
 F32 = NDArray[np.float32]
 
 
-class NavVectorEnv(gym.vector.VectorEnv[F32, F32, F32]):
+class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
     """``num_envs`` copies of ``scenario`` stepped together (see the module docstring)."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
@@ -108,7 +108,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, F32]):
 
     def step(
         self, actions: NDArray[np.floating]
-    ) -> tuple[F32, NDArray[np.float64], Any, Any, dict[str, Any]]:
+    ) -> tuple[F32, NDArray[Any], NDArray[Any], NDArray[Any], dict[str, Any]]:
         """Apply ``(v, ω)`` of every copy, shape ``(num_envs, 2)``; copies that ended on the
         previous step restart instead (reward 0, both flags false)."""
         cmd = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
