@@ -30,8 +30,8 @@ from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, dagger_seed, run_dagger
-from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
+from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message
 

@@ -114,7 +114,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         cmd = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
         prev = self.state
         new = step(self.world, prev, cmd)
-        terms, total, event = crowdnav_reward_terms(self.world, prev, new, self.reward_cfg)
+        _, total, event = crowdnav_reward_terms(self.world, prev, new, self.reward_cfg)
         restart = np.flatnonzero(self._autoreset)
         for i in restart:
             new.put(int(i), sample_state(self.scenario, self._rngs[i]))
