@@ -71,12 +71,7 @@ def bench_teacher_decision(plan: Plan) -> Result:
     teacher = make_teacher(SCENARIO)
     teacher.decide(world, state)
     ro = rollout(world, state, teacher.candidates)
-    c, n_l = ro.robot.shape[:2]
-    feats = feature_map("obs_action").from_arrays(
-        ro.robot[:, :, :2].reshape(c * n_l, 2),
-        ro.obs.reshape(c * n_l, -1),
-        np.repeat(ro.commands, n_l, axis=0),
-    )
+    feats = feature_map("obs_action").from_rollout(ro.robot, ro.obs, ro.commands)
     assert teacher.density is not None
     density = teacher.density
     cases = {

@@ -163,6 +163,7 @@ _BUILTINS = (
 
 _ENTRIES: dict[str, PolicyEntry] = {e.name: e for e in _BUILTINS}
 _PLUGINS_LOADED = False
+_UNRESOLVED_PLUGINS: set[str] = set()  # entry points whose target may be a PolicyEntry
 
 
 def _load_plugins() -> None:
@@ -174,8 +175,8 @@ def _load_plugins() -> None:
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         if ep.name in _ENTRIES:
             continue  # a plugin never shadows a registered name
-        entry = PolicyEntry(ep.name, ep.value, summary=f"from {ep.value}")
-        _ENTRIES[ep.name] = entry
+        _ENTRIES[ep.name] = PolicyEntry(ep.name, ep.value, summary=f"from {ep.value}")
+        _UNRESOLVED_PLUGINS.add(ep.name)
 
 
 def register_policy(
@@ -209,7 +210,8 @@ def policy_entry(name: str) -> PolicyEntry:
             expect("policy", f"one of {policy_names()}", name, "pick a listed policy")
         )
     # A plugin's entry point may name a PolicyEntry instead of a factory.
-    if isinstance(entry.entry_point, str) and entry.summary.startswith("from "):
+    if name in _UNRESOLVED_PLUGINS and isinstance(entry.entry_point, str):
+        _UNRESOLVED_PLUGINS.discard(name)
         obj = entry._load(entry.entry_point)
         if isinstance(obj, PolicyEntry):
             entry = dataclasses.replace(obj, name=name)

@@ -166,11 +166,9 @@ class LookaheadTeacher:
         if self.density is not None and w.use_density and n_feasible:
             # Only candidates that can be chosen: about half collide in the lobby, and the
             # density is most of a decision's arithmetic. (Infeasible ones keep 0; they score −∞.)
-            feats = self._feature_map.from_arrays(
-                ro.robot[:, :, :2].reshape(c * n_l, 2),
-                ro.obs.reshape(c * n_l, -1),
-                np.repeat(ro.commands, n_l, axis=0),
-            ).reshape(c, n_l, -1)[feasible]
+            feats = self._feature_map.from_rollout(ro.robot, ro.obs, ro.commands).reshape(
+                c, n_l, -1
+            )[feasible]
             r_den[feasible] = (
                 self.density(feats.reshape(n_feasible * n_l, -1))
                 .reshape(n_feasible, n_l)

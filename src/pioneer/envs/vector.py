@@ -5,7 +5,7 @@
 ``SyncVectorEnv`` over :class:`~pioneer.envs.env.NavEnv` copies.
 
 One ``step`` is one call of the world kernel for every copy, one reward evaluation
-(:func:`pioneer.reward.crowdnav.crowdnav_reward_terms`) and one event classification
+(:func:`pioneer.reward.crowdnav.crowdnav_reward`) and one event classification
 (:func:`pioneer.sim.events.classify`) — the same functions the single environment and the
 CrowdNav++ trainer use. Copy i has its own generator, seeded ``seed + i`` like
 ``SyncVectorEnv`` seeds its environments, and restarts by Gymnasium's default next-step
@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pioneer.envs.env import spaces
 from pioneer.errors import ConfigError, expect
-from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward_terms
+from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
@@ -91,9 +91,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
                 self._rngs[i] = gym.utils.seeding.np_random(s)[0]
         self._state = State.concat([sample_state(self.scenario, rng) for rng in self._rngs])
         self._autoreset[:] = False
-        return self._observe(np.arange(self.num_envs)), self._info(
-            self._state, np.zeros(self.num_envs, dtype=np.int8)
-        )
+        return self._observe(), self._info(self._state, np.zeros(self.num_envs, dtype=np.int8))
 
     def _seeds(self, seed: int | list[int | None] | None) -> list[int | None]:
         if seed is None:
@@ -114,7 +112,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         cmd = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
         prev = self.state
         new = step(self.world, prev, cmd)
-        _, total, event = crowdnav_reward_terms(self.world, prev, new, self.reward_cfg)
+        total, event = crowdnav_reward(self.world, prev, new, self.reward_cfg)
         restart = np.flatnonzero(self._autoreset)
         for i in restart:
             new.put(int(i), sample_state(self.scenario, self._rngs[i]))
@@ -124,15 +122,15 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         terminated = (event == Event.SUCCESS) | (event == Event.COLLISION)
         truncated = event == Event.TIMEOUT
         self._autoreset = terminated | truncated
-        obs = self._observe(np.arange(self.num_envs))
+        obs = self._observe()
         return obs, total, terminated, truncated, self._info(new, event)
 
-    def _observe(self, copies: NDArray[np.int64]) -> F32:
+    def _observe(self) -> F32:
         if not self._noisy:
             return observe(self.world, self.state)
         # Each copy draws its LiDAR noise from its own generator, as a NavEnv would.
         return np.concatenate(
-            [observe(self.world, self.state.take(int(i)), self._rngs[i]) for i in copies]
+            [observe(self.world, self.state.take(i), rng) for i, rng in enumerate(self._rngs)]
         )
 
     def _info(self, state: State, event: NDArray[np.int8]) -> dict[str, Any]:

@@ -19,6 +19,7 @@ environment charged ω² Δt, 10× more at Δt = 0.1 s (docs/architecture.md).
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,12 +49,23 @@ class CrowdNavRewardConfig(Config):
     pred_dt: float = 0.25  # [s] Δt_pred between predicted positions
 
 
-def crowdnav_reward_terms(
-    world: World, prev: State, new: State, config: CrowdNavRewardConfig
-) -> tuple[dict[str, F64], F64, NDArray[np.int8]]:
-    """Per-term rewards ``{name: (B,)}``, their total ``(B,)`` and the event codes ``(B,)``
-    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new``."""
-    rc, sim = config, world.sim
+class _Parts(NamedTuple):
+    event: NDArray[np.int8]
+    ongoing: NDArray[np.bool_]  # neither collided nor arrived in this step
+    close: NDArray[np.bool_]  # clearance below the discomfort distance
+    base: F64  # discomfort or potential term
+    first: F64  # outcome reward, else ``base``
+    intrusion: F64
+    spin: F64
+    reverse: F64
+
+    @property
+    def total(self) -> F64:
+        return self.first + self.intrusion + self.spin + self.reverse
+
+
+def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _Parts:
+    sim = world.sim
     dt = sim.dt
     event = classify(prev, new, sim.time_limit)
     collided, reached = event == Event.COLLISION, event == Event.SUCCESS
@@ -77,22 +89,32 @@ def crowdnav_reward_terms(
     v, w = new.command[:, 0], new.command[:, 1]
     spin = rc.spin * (w * dt) ** 2
     rev = np.where(v < 0.0, rc.reverse * np.abs(v), 0.0)
-    total = first + intr + spin + rev
+    return _Parts(event, ongoing, close, base, first, intr, spin, rev)
+
+
+def crowdnav_reward_terms(
+    world: World, prev: State, new: State, config: CrowdNavRewardConfig
+) -> tuple[dict[str, F64], F64, NDArray[np.int8]]:
+    """Per-term rewards ``{name: (B,)}``, their total ``(B,)`` and the event codes ``(B,)``
+    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new``."""
+    rc = config
+    p = _parts(world, prev, new, rc)
     terms = {
-        "success": np.where(reached, rc.success, 0.0),
-        "collision": np.where(collided, rc.collision, 0.0),
-        "discomfort": np.where(ongoing & close, base, 0.0),
-        "progress": np.where(ongoing & ~close, base, 0.0),
-        "intrusion": intr,
-        "spin": spin,
-        "reverse": rev,
+        "success": np.where(p.event == Event.SUCCESS, rc.success, 0.0),
+        "collision": np.where(p.event == Event.COLLISION, rc.collision, 0.0),
+        "discomfort": np.where(p.ongoing & p.close, p.base, 0.0),
+        "progress": np.where(p.ongoing & ~p.close, p.base, 0.0),
+        "intrusion": p.intrusion,
+        "spin": p.spin,
+        "reverse": p.reverse,
     }
-    return terms, total, event
+    return terms, p.total, p.event
 
 
 def crowdnav_reward(
     world: World, prev: State, new: State, config: CrowdNavRewardConfig
 ) -> tuple[F64, NDArray[np.int8]]:
-    """Total reward ``(B,)`` and event codes ``(B,)`` of the step ``prev → new``."""
-    _, total, event = crowdnav_reward_terms(world, prev, new, config)
-    return total, event
+    """Total reward ``(B,)`` and event codes ``(B,)`` of the step ``prev → new`` (without the
+    per-term breakdown: the trainer's and the vector env's hot path)."""
+    p = _parts(world, prev, new, config)
+    return p.total, p.event

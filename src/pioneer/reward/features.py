@@ -38,6 +38,18 @@ class FeatureMap:
             return np.asarray(xy, dtype=np.float64)
         return np.concatenate([obs.astype(np.float64), action], axis=1)
 
+    def from_rollout(
+        self, robot: NDArray[np.floating], obs: NDArray[np.floating], commands: NDArray[np.floating]
+    ) -> NDArray[np.float64]:
+        """Features of every rollout state, ``(C·L, D)``, from poses ``(C, L, 3)``, observations
+        ``(C, L, 29)`` and each candidate's constant command ``(C, 2)``."""
+        c, n_l = robot.shape[:2]
+        return self.from_arrays(
+            robot[:, :, :2].reshape(c * n_l, 2),
+            obs.reshape(c * n_l, -1),
+            np.repeat(commands, n_l, axis=0),
+        )
+
     def from_dataset(self, d: Dataset) -> NDArray[np.float64]:
         """Features of every row, ``(N, D)``."""
         return self.from_arrays(d.pose[:, :2], d.obs, d.action)
