@@ -5,10 +5,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from typing import Annotated
 
 import pytest
+from annotated_types import Ge, Gt, Interval, Le, Lt, MinLen, MultipleOf
 
-from pioneer.config import Config, check_nonnegative, check_positive, check_range
+from pioneer.config import (
+    Config,
+    NonNegative,
+    Positive,
+    check_nonnegative,
+    check_positive,
+    check_range,
+)
 from pioneer.errors import (
     CommandError,
     ConfigError,
@@ -18,6 +27,7 @@ from pioneer.errors import (
     expect,
 )
 from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
+from pioneer.reward.density import DensityConfig
 from pioneer.sim import ElevatorLayout, LidarConfig, RobotConfig, SimConfig, SocialForceConfig
 from pioneer_testutils import assert_house_message
 
@@ -142,3 +152,148 @@ def test_base_config_is_a_frozen_dataclass():
 
     assert Small.from_dict({"b": [3, 4]}) == Small(a=1, b=(3, 4))
     assert Small().to_dict() == {"a": 1, "b": [1, 2]}
+
+
+# --------------------------------------------------------------- bounds declared on the fields
+@dataclasses.dataclass(frozen=True)
+class Bounded(Config):
+    rate: Positive = 1.0
+    offset: NonNegative = 0.0
+    share: Annotated[float, Interval(ge=0, le=1)] = 0.5
+    below: Annotated[float, Lt(10)] = 1.0
+    open_share: Annotated[float, Gt(0), Le(1)] = 1.0
+    count: Annotated[int, Ge(1)] = 3
+    scale: Positive | None = None
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "helper"),
+    [({"rate": 0.0}, check_positive), ({"offset": -1.0}, check_nonnegative)],
+)
+def test_declared_bounds_say_what_the_check_helpers_say(kwargs, helper):
+    ((name, value),) = kwargs.items()
+    with pytest.raises(ConfigError) as declared:
+        Bounded(**kwargs)
+    with pytest.raises(ConfigError) as by_hand:
+        helper("Bounded", name, value)
+    assert str(declared.value) == str(by_hand.value)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "kind", "bounds"),
+    [
+        ({"rate": -2.0}, "a finite number", "> 0"),
+        ({"rate": math.nan}, "a finite number", "> 0"),
+        ({"rate": math.inf}, "a finite number", "> 0"),
+        ({"rate": "1"}, "a finite number", "> 0"),
+        ({"offset": -1e-12}, "a finite number", ">= 0"),
+        ({"share": 1.5}, "a finite number", ">= 0 and <= 1"),
+        ({"share": -0.1}, "a finite number", ">= 0 and <= 1"),
+        ({"below": 10.0}, "a finite number", "< 10"),
+        ({"open_share": 0.0}, "a finite number", "> 0 and <= 1"),
+        ({"count": 0}, "an integer", ">= 1"),
+        ({"count": 2.5}, "an integer", ">= 1"),
+        ({"count": True}, "an integer", ">= 1"),
+        ({"scale": 0.0}, "a finite number", "> 0"),
+    ],
+)
+def test_declared_bounds_are_enforced_with_the_house_message(kwargs, kind, bounds):
+    ((name, value),) = kwargs.items()
+    with pytest.raises(ConfigError) as exc:
+        Bounded(**kwargs)
+    msg = str(exc.value)
+    assert msg == expect(f"Bounded.{name}", f"{kind} {bounds}", value, f"set {name} {bounds}")
+    assert_house_message(msg, f"Bounded.{name}")
+
+
+def test_declared_bounds_accept_their_edges_and_none():
+    edges = Bounded(rate=1, offset=0.0, share=0.0, below=9.99, open_share=1.0, count=1)
+    assert edges.rate == 1 and edges.scale is None
+    assert Bounded(share=1.0, scale=2.0).scale == 2.0
+
+
+def test_declared_bounds_hold_for_replace_from_dict_and_subclasses():
+    with pytest.raises(ConfigError, match=r"Bounded\.rate"):
+        Bounded().replace(rate=0.0)
+    with pytest.raises(ConfigError, match=r"Bounded\.count"):
+        Bounded.from_dict({"count": 0})
+
+    @dataclasses.dataclass(frozen=True)
+    class Wider(Bounded):
+        extra: NonNegative = 1.0
+
+    with pytest.raises(ConfigError, match=r"Wider\.rate"):
+        Wider(rate=0.0)
+    with pytest.raises(ConfigError, match=r"Wider\.extra"):
+        Wider(extra=-1.0)
+
+
+def test_declared_bounds_are_checked_before_the_subclass_post_init():
+    seen = []
+
+    @dataclasses.dataclass(frozen=True)
+    class Span(Config):
+        lo: NonNegative = 0.0
+        hi: NonNegative = 1.0
+
+        def __post_init__(self) -> None:  # a cross-field check, written as code
+            seen.append((self.lo, self.hi))
+            if self.lo > self.hi:
+                raise ConfigError(expect("Span.lo", "<= hi", self.lo, "lower lo"))
+
+    with pytest.raises(ConfigError) as exc:
+        Span(lo=-1.0, hi=-2.0)
+    assert "Span.lo: expected a finite number >= 0" in str(exc.value)
+    assert seen == []  # the cross-field check never saw an out-of-range value
+    with pytest.raises(ConfigError, match="<= hi"):
+        Span(lo=2.0)
+    assert seen == [(2.0, 1.0)]
+
+
+def test_unsupported_constraints_are_refused_not_ignored():
+    @dataclasses.dataclass(frozen=True)
+    class Named(Config):
+        name: Annotated[str, MinLen(1)] = "x"
+
+    @dataclasses.dataclass(frozen=True)
+    class Even(Config):
+        n: Annotated[int, MultipleOf(2)] = 2
+
+    with pytest.raises(TypeError, match=r"Named\.name"):
+        Named()
+    with pytest.raises(TypeError, match="unsupported constraint"):
+        Even()
+
+
+@pytest.mark.parametrize(
+    ("cls", "name", "value", "helper"),
+    [
+        (RobotConfig, "radius", 0.0, check_positive),
+        (RobotConfig, "v_min", -0.1, check_nonnegative),
+        (RobotConfig, "v_max", -1.0, check_positive),
+        (RobotConfig, "omega_max", math.nan, check_positive),
+        (SocialForceConfig, "tau", 0.0, check_positive),
+        (SocialForceConfig, "a_robot", -0.5, check_nonnegative),
+        (SocialForceConfig, "settle_distance", math.inf, check_positive),
+        (DensityConfig, "lam", -1.0, check_positive),
+        (DensityConfig, "length_scale", 0.0, check_positive),
+        (DensityConfig, "jitter", 0.0, check_positive),
+    ],
+)
+def test_converted_configs_keep_their_messages(cls, name, value, helper):
+    with pytest.raises(ConfigError) as declared:
+        cls(**{name: value})
+    with pytest.raises(ConfigError) as by_hand:
+        helper(cls.__name__, name, value)
+    assert str(declared.value) == str(by_hand.value)
+
+
+def test_converted_configs_keep_their_cross_field_and_choice_checks():
+    assert SocialForceConfig(a_robot=0.0).a_robot == 0.0  # the robot may be invisible
+    assert DensityConfig(length_scale=None).length_scale is None
+    with pytest.raises(ConfigError, match="v_max="):
+        RobotConfig(v_min=0.5, v_max=0.2)
+    with pytest.raises(ConfigError, match="inducing"):
+        DensityConfig(inducing="random")
+    with pytest.raises(ConfigError, match="an integer >= 1"):
+        DensityConfig(max_inducing=0)

@@ -1,32 +1,96 @@
-"""Typed, frozen configuration base: defaults live in one place, unknown keys are rejected."""
+"""Typed, frozen configuration base: defaults live in one place, unknown keys are rejected,
+and range checks are declared on the fields.
+
+A field may carry `annotated-types <https://github.com/annotated-types/annotated-types>`_
+bounds, e.g. ``radius: Annotated[float, Gt(0)] = 0.3`` (or the aliases :data:`Positive`,
+:data:`NonNegative`); :class:`Config` enforces them once, before any ``__post_init__`` of the
+subclass runs, with the message of :func:`check_positive` / :func:`check_nonnegative`.
+Supported: ``Gt``, ``Ge``, ``Lt``, ``Le`` and ``Interval`` on ``int`` and ``float`` fields,
+also inside ``| None`` (``None`` then passes). A bounded ``float`` must be finite; a bounded
+``int`` must be an integer (not a bool). Cross-field checks stay code in ``__post_init__``.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
-from typing import Any, Self
+import weakref
+from collections.abc import Callable, Iterator
+from typing import Annotated, Any, Self
+
+import annotated_types as at
 
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["Config", "check_nonnegative", "check_positive", "check_range"]
+__all__ = [
+    "Config",
+    "NonNegative",
+    "Positive",
+    "check_nonnegative",
+    "check_positive",
+    "check_range",
+]
+
+Positive = Annotated[float, at.Gt(0)]  # a finite number > 0
+NonNegative = Annotated[float, at.Ge(0)]  # a finite number >= 0
+
+
+@dataclasses.dataclass(frozen=True)
+class _Bounds:
+    """The bounds declared on one field, checked with the house message."""
+
+    integer: bool = False  # an ``int`` field: the value must be an integer (not a bool)
+    lower: float | None = None
+    lower_strict: bool = False  # Gt rather than Ge
+    upper: float | None = None
+    upper_strict: bool = False  # Lt rather than Le
+    optional: bool = False  # ``None`` passes
+
+    def describe(self) -> str:
+        """``> 0``, ``>= 1``, ``>= 0 and <= 1``: the accepted range."""
+        parts = []
+        if self.lower is not None:
+            parts.append(f"{'>' if self.lower_strict else '>='} {self.lower:g}")
+        if self.upper is not None:
+            parts.append(f"{'<' if self.upper_strict else '<='} {self.upper:g}")
+        return " and ".join(parts)
+
+    def check(self, owner: str, name: str, value: object) -> None:
+        """Raise :class:`ConfigError` unless ``value`` lies within the bounds."""
+        if value is None and self.optional:
+            return
+        if not self._accepts(value):
+            rng = self.describe()
+            kind = "an integer" if self.integer else "a finite number"
+            raise ConfigError(
+                expect(f"{owner}.{name}", f"{kind} {rng}", value, f"set {name} {rng}")
+            )
+
+    def _accepts(self, value: object) -> bool:
+        if self.integer:
+            if not isinstance(value, int) or isinstance(value, bool):
+                return False
+        elif not (isinstance(value, int | float) and math.isfinite(value)):
+            return False
+        x = float(value)
+        if self.lower is not None and not (
+            x > self.lower if self.lower_strict else x >= self.lower
+        ):
+            return False
+        return self.upper is None or (x < self.upper if self.upper_strict else x <= self.upper)
 
 
 def check_positive(owner: str, name: str, value: float) -> None:
     """Raise :class:`ConfigError` unless ``value`` is a finite number > 0."""
-    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-        raise ConfigError(
-            expect(f"{owner}.{name}", "a finite number > 0", value, f"set {name} > 0")
-        )
+    _Bounds(lower=0, lower_strict=True).check(owner, name, value)
 
 
 def check_nonnegative(owner: str, name: str, value: float) -> None:
     """Raise :class:`ConfigError` unless ``value`` is a finite number ≥ 0."""
-    if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-        raise ConfigError(
-            expect(f"{owner}.{name}", "a finite number >= 0", value, f"set {name} >= 0")
-        )
+    _Bounds(lower=0).check(owner, name, value)
 
 
 def check_range(owner: str, name: str, lo: float, hi: float) -> None:
@@ -37,9 +101,111 @@ def check_range(owner: str, name: str, lo: float, hi: float) -> None:
         )
 
 
+def _constraints(metadata: tuple[Any, ...]) -> Iterator[at.BaseMetadata]:
+    """The annotated-types constraints among ``Annotated`` metadata (``Interval`` unpacked);
+    other metadata (e.g. CLI markers) is not ours and is skipped."""
+    for m in metadata:
+        if isinstance(m, at.GroupedMetadata):
+            yield from _constraints(tuple(m))
+        elif isinstance(m, at.BaseMetadata):
+            yield m
+
+
+def _without_none(hint: Any) -> tuple[Any, bool]:
+    """``X | None`` → ``(X, True)``; anything else → ``(hint, False)``."""
+    args = typing.get_args(hint)
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    if union and len(args) == 2 and type(None) in args:
+        return next(a for a in args if a is not type(None)), True
+    return hint, False
+
+
+# constraint type → (which bound, its attribute, strict)
+_BOUND_KINDS: dict[type, tuple[str, str, bool]] = {
+    at.Gt: ("lower", "gt", True),
+    at.Ge: ("lower", "ge", False),
+    at.Lt: ("upper", "lt", True),
+    at.Le: ("upper", "le", False),
+}
+
+
+def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | None:
+    """The bounds of one field from its resolved type hint, or ``None`` if it declares none."""
+    hint, optional = _without_none(hint)
+    if typing.get_origin(hint) is not Annotated:
+        return None
+    base, *metadata = typing.get_args(hint)
+    found = list(_constraints(tuple(metadata)))
+    if not found:
+        return None
+    base, none_inside = _without_none(base)
+    if base not in (int, float):
+        raise TypeError(f"{owner}.{name}: bounds need an int or float field, not {base!r}")
+    kw: dict[str, Any] = {}
+    for c in found:
+        if type(c) not in _BOUND_KINDS:
+            raise TypeError(
+                f"{owner}.{name}: unsupported constraint {c!r} (use Gt, Ge, Lt, Le, Interval)"
+            )
+        key, attr, strict = _BOUND_KINDS[type(c)]
+        if key in kw:
+            raise TypeError(f"{owner}.{name}: more than one {key} bound")
+        kw[key], kw[f"{key}_strict"] = float(getattr(c, attr)), strict
+    return _Bounds(integer=base is int, optional=optional or none_inside, **kw)
+
+
+_BOUNDS: dict[type, tuple[tuple[str, _Bounds], ...]] = {}
+
+
+def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds], ...]:
+    """``(field name, bounds)`` of every bounded field of a config class (resolved once)."""
+    if cls in _BOUNDS:
+        return _BOUNDS[cls]
+    hints = typing.get_type_hints(cls, include_extras=True)
+    found = (
+        (f.name, _field_bounds(cls.__name__, f.name, hints[f.name]))
+        for f in dataclasses.fields(cls)
+    )
+    _BOUNDS[cls] = tuple((name, b) for name, b in found if b is not None)
+    return _BOUNDS[cls]
+
+
+def _check_bounds(cfg: Config) -> None:
+    owner = type(cfg).__name__
+    for name, bounds in _bounds_of(type(cfg)):
+        bounds.check(owner, name, getattr(cfg, name))
+
+
+_BOUNDS_FIRST: weakref.WeakSet[Callable[[Any], None]] = weakref.WeakSet()
+
+
+def _bounds_first(post_init: Callable[[Any], None]) -> Callable[[Any], None]:
+    """``post_init`` preceded by the field bounds (its cross-field checks may rely on them)."""
+
+    @functools.wraps(post_init)
+    def checked(self: Config) -> None:
+        _check_bounds(self)
+        post_init(self)
+
+    _BOUNDS_FIRST.add(checked)
+    return checked
+
+
 @dataclasses.dataclass(frozen=True)
 class Config:
-    """Base of every config dataclass: ``from_dict`` rejects unknown keys, ``to_dict`` nests."""
+    """Base of every config dataclass: ``from_dict`` rejects unknown keys, ``to_dict`` nests,
+    and the bounds declared on the fields (``Annotated[float, Gt(0)]``, see the module) are
+    checked on every construction, ``replace`` and ``from_dict`` included, before the
+    subclass's own ``__post_init__`` (which need not call ``super().__post_init__()``)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.get("__post_init__")
+        if own is not None and own not in _BOUNDS_FIRST:
+            cls.__post_init__ = _bounds_first(own)  # type: ignore[method-assign,assignment]
+
+    def __post_init__(self) -> None:
+        _check_bounds(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:

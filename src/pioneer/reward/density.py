@@ -22,55 +22,52 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Any, Self
+from typing import Annotated, Any, Self
 
 import numpy as np
 import scipy.linalg
+from annotated_types import Ge
 from numpy.typing import ArrayLike, NDArray
 
-from pioneer.config import Config, check_positive
+from pioneer.config import Config, Positive
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, load_npz
 from pioneer.reward.fastexp import exp_shifted_inplace
 from pioneer.reward.kernels import leverage_factor, sq_dists
 
-__all__ = ["DensityConfig", "DensityReward", "farthest_point_indices", "kmeans_medoid_indices"]
+__all__ = [
+    "INDUCING",
+    "DensityConfig",
+    "DensityReward",
+    "farthest_point_indices",
+    "kmeans_medoid_indices",
+]
 
 F64 = NDArray[np.float64]
 FORMAT = "pioneer.density_reward/1"
 _CHUNK = 4096
+INDUCING = ("kmeans", "fps")  # how a subset of inducing points is chosen
 
 
 @dataclasses.dataclass(frozen=True)
 class DensityConfig(Config):
     """Hyperparameters of the density reward (defaults: docs/reward.md)."""
 
-    gain2: float = 1.0  # g², kernel output scale
-    length_scale: float | None = None  # l in standardised units; None → heuristic below
-    length_scale_factor: float = 1.0  # multiplies the heuristic (median pairwise distance)
-    lam: float = 1e-2  # λ, weight of the RKHS-norm regulariser
-    beta: float = 1e-3  # β, weight of the coefficient-norm regulariser
-    max_inducing: int = 2000  # above this many demos, choose a subset of inducing points
+    gain2: Positive = 1.0  # g², kernel output scale
+    length_scale: Positive | None = None  # l in standardised units; None → heuristic below
+    length_scale_factor: Positive = 1.0  # multiplies the heuristic (median pairwise distance)
+    lam: Positive = 1e-2  # λ, weight of the RKHS-norm regulariser
+    beta: Positive = 1e-3  # β, weight of the coefficient-norm regulariser
+    max_inducing: Annotated[int, Ge(1)] = 2000  # more demos: choose a subset as inducing points
     inducing: str = "kmeans"  # "kmeans" (medoids) or "fps" (farthest-point sampling)
-    jitter: float = 1e-8  # first diagonal jitter tried if the Cholesky factorisation fails
+    jitter: Positive = 1e-8  # first diagonal jitter tried if the Cholesky factorisation fails
     standardize: bool = True  # z-score features with the training statistics
     seed: int = 0  # for k-means / FPS / the length-scale subsample
 
     def __post_init__(self) -> None:
-        check_positive("DensityConfig", "gain2", self.gain2)
-        check_positive("DensityConfig", "lam", self.lam)
-        check_positive("DensityConfig", "beta", self.beta)
-        check_positive("DensityConfig", "jitter", self.jitter)
-        check_positive("DensityConfig", "length_scale_factor", self.length_scale_factor)
-        if self.length_scale is not None:
-            check_positive("DensityConfig", "length_scale", self.length_scale)
-        if not isinstance(self.max_inducing, int) or self.max_inducing < 1:
+        if self.inducing not in INDUCING:
             raise ConfigError(
-                expect("DensityConfig.max_inducing", "an integer >= 1", self.max_inducing, "fix")
-            )
-        if self.inducing not in ("kmeans", "fps"):
-            raise ConfigError(
-                expect("DensityConfig.inducing", "'kmeans' or 'fps'", self.inducing, "pick one")
+                expect("DensityConfig.inducing", f"one of {INDUCING}", self.inducing, "pick one")
             )
 
 

@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.config import Config, NonNegative, Positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.geometry import closest_point_on_segment, norm2d, wall_offsets
 
@@ -90,26 +90,19 @@ class SocialForceConfig(Config):
     humans jam in the 4 m lobby even without a robot, with Helbing–Molnár's 0.5 s they do not.
     """
 
-    tau: float = 0.5  # [s] relaxation time τ of the driving term (Helbing–Molnár)
-    a_human: float = 2.0  # [m/s²] A, human–human repulsion strength
-    b_human: float = 0.5  # [m] B, human–human repulsion range
-    a_robot: float = A_ROBOT_WEAK  # [m/s²] human–robot repulsion strength; 0: robot invisible
-    b_robot: float = 0.5  # [m] human–robot repulsion range
-    a_wall: float = 2.0  # [m/s²] human–wall repulsion strength
-    b_wall: float = 0.2  # [m] human–wall repulsion range (Helbing–Molnár's R = 0.2 m)
-    speed_cap_factor: float = 1.3  # [-] ‖v‖ ≤ factor · v_pref
-    waypoint_tolerance: float = 0.3  # [m] distance at which an intermediate waypoint is passed
-    goal_tolerance: float = 0.3  # [m] distance at which the final goal is reached (then stop)
-    max_substep: float = 0.1  # [s] longest integration step; longer steps are subdivided
-    settle_speed: float = 0.05  # [m/s] a walking human slower than this has stalled …
-    settle_distance: float = 1.0  # [m] … and within this of its target counts as there
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            if f.name == "a_robot":
-                check_nonnegative("SocialForceConfig", f.name, self.a_robot)
-            else:
-                check_positive("SocialForceConfig", f.name, getattr(self, f.name))
+    tau: Positive = 0.5  # [s] relaxation time τ of the driving term (Helbing–Molnár)
+    a_human: Positive = 2.0  # [m/s²] A, human–human repulsion strength
+    b_human: Positive = 0.5  # [m] B, human–human repulsion range
+    a_robot: NonNegative = A_ROBOT_WEAK  # [m/s²] human–robot repulsion strength; 0: robot invisible
+    b_robot: Positive = 0.5  # [m] human–robot repulsion range
+    a_wall: Positive = 2.0  # [m/s²] human–wall repulsion strength
+    b_wall: Positive = 0.2  # [m] human–wall repulsion range (Helbing–Molnár's R = 0.2 m)
+    speed_cap_factor: Positive = 1.3  # [-] ‖v‖ ≤ factor · v_pref
+    waypoint_tolerance: Positive = 0.3  # [m] distance at which an intermediate waypoint is passed
+    goal_tolerance: Positive = 0.3  # [m] distance at which the final goal is reached (then stop)
+    max_substep: Positive = 0.1  # [s] longest integration step; longer steps are subdivided
+    settle_speed: Positive = 0.05  # [m/s] a walking human slower than this has stalled …
+    settle_distance: Positive = 1.0  # [m] … and within this of its target counts as there
 
     @classmethod
     def preset(cls, name: str) -> SocialForceConfig:

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.config import Config, NonNegative, Positive
 from pioneer.errors import CommandError, ConfigError, expect
 
 __all__ = ["RobotConfig", "clip_command", "integrate_unicycle", "validate_command", "wrap_angle"]
@@ -24,16 +24,12 @@ __all__ = ["RobotConfig", "clip_command", "integrate_unicycle", "validate_comman
 class RobotConfig(Config):
     """Robot body and command limits."""
 
-    radius: float = 0.3  # [m] r_r
-    v_min: float = 0.0  # [m/s]
-    v_max: float = 0.8  # [m/s]
-    omega_max: float = 0.4 * math.pi  # [rad/s] |ω| ≤ omega_max
+    radius: Positive = 0.3  # [m] r_r
+    v_min: NonNegative = 0.0  # [m/s]
+    v_max: Positive = 0.8  # [m/s]
+    omega_max: Positive = 0.4 * math.pi  # [rad/s] |ω| ≤ omega_max
 
     def __post_init__(self) -> None:
-        check_positive("RobotConfig", "radius", self.radius)
-        check_nonnegative("RobotConfig", "v_min", self.v_min)
-        check_positive("RobotConfig", "v_max", self.v_max)
-        check_positive("RobotConfig", "omega_max", self.omega_max)
         if self.v_min > self.v_max:
             raise ConfigError(
                 expect("RobotConfig.v_min", f"<= v_max={self.v_max}", self.v_min, "lower v_min")

@@ -1,0 +1,197 @@
+"""The command tree of ``pioneer``, parsed with tyro, and :func:`main`.
+
+A command's options are a frozen dataclass in the module of its group (``evaluation``,
+``scenarios``, ``learning``, ``demos``, ``deploy``, ``reward``) with a ``run`` method. Those
+modules import what the defaults are read from (torch for ``distill``, the simulator for
+``eval``), so only the chosen command's module is imported: the command line is parsed in
+two steps, both by tyro. The tree (``pioneer [--scenarios FILE] COMMAND``, with ``--help``
+listing the commands) is parsed with a placeholder per command, then the command's own
+options, as ``pioneer eval …`` (its ``--help`` lists its defaults).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import importlib
+import os
+import sys
+import typing
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any, NoReturn, cast
+
+import tyro
+
+from pioneer.cli._common import Command
+from pioneer.cli._parse import parse, refuse
+from pioneer.errors import PioneerError, expect
+
+__all__ = ["main"]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Leaf:
+    target: str  # "module:Class" in pioneer.cli
+    help: str
+
+    def load(self) -> type[Command]:
+        """The options class (importing its module: what its defaults are read from)."""
+        module, name = self.target.split(":")
+        return cast(type[Command], getattr(importlib.import_module(f"pioneer.cli.{module}"), name))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Group:
+    help: str
+    children: dict[str, _Leaf | _Group]
+
+
+_TREE = _Group(
+    "PioneeR social navigation toolkit",
+    {
+        "run": _Leaf("evaluation:Run", "run one episode of a policy; optionally write a GIF/PNG"),
+        "scenarios": _Leaf(
+            "scenarios:Scenarios", "list the scenarios (with --scenarios files); draw them"
+        ),
+        "eval": _Leaf(
+            "evaluation:Eval", "evaluate policies: N seeds × M trials, parallel, resumable"
+        ),
+        "reproduce": _Leaf("evaluation:Reproduce", "the paper's tables and figures (the main job)"),
+        "calibrate": _Leaf(
+            "scenarios:Calibrate", "world statistics beside the paper's evidence (validation seeds)"
+        ),
+        "distill": _Leaf(
+            "learning:Distill", "DAgger: distil the teacher into a LiDAR-only student"
+        ),
+        "export": _Leaf("deploy:Export", "student checkpoint → ONNX, with a parity check"),
+        "replay": _Leaf("deploy:Replay", "ROS bag LaserScans → student commands CSV (no ROS)"),
+        "train": _Group(
+            "train an RL baseline",
+            {
+                "crowdnav++": _Leaf(
+                    "learning:TrainCrowdNav", "CrowdNav++ with PPO (resumes an existing --out)"
+                )
+            },
+        ),
+        "demos": _Group(
+            "demonstration datasets",
+            {
+                "generate": _Leaf("demos:DemosGenerate", "scripted demonstrations (γ = +1 and −1)"),
+                "show": _Leaf("demos:DemosShow", "summary of a dataset file"),
+            },
+        ),
+        "teleop": _Leaf("demos:Teleop", "drive with the keyboard and record labelled demos"),
+        "reward": _Group(
+            "the learned density reward",
+            {
+                "fit": _Leaf("reward:RewardFit", "fit the density reward on a dataset"),
+                "show": _Leaf("reward:RewardShow", "summary of a fitted model"),
+            },
+        ),
+        "study": _Group(
+            "paper studies",
+            {"static": _Leaf("reward:StudyStatic", "the synthetic static study (paper Fig. 3)")},
+        ),
+    },
+)
+
+_SCENARIOS_HELP = (
+    "register the scenario variants of a JSON file (format pioneer.scenarios/1, see "
+    "docs/simulator.md) for the command; same as listing it in PIONEER_SCENARIOS"
+)
+
+
+def _tree_type(name: str, group: _Group) -> Any:
+    """A dataclass whose ``command`` field is the union of ``group``'s children (tyro's
+    subcommands); a command is a placeholder without options (parsed on its own)."""
+    options = []
+    for child_name, child in group.children.items():
+        child_type = (
+            _tree_type(child_name, child)
+            if isinstance(child, _Group)
+            else dataclasses.make_dataclass(child_name, [], frozen=True)
+        )
+        sub = tyro.conf.subcommand(child_name, description=child.help, prefix_name=False)
+        options.append(Annotated[child_type, sub])
+    # "| None", suppressed: a group of one command is still a choice (tyro needs a union).
+    union: Any = typing.Union
+    required = Annotated[union[(*options, None)], tyro.conf.DisallowNone]
+    fields: list[Any] = [("command", required)]
+    if group is _TREE:
+        files = Annotated[
+            tyro.conf.UseAppendAction[tuple[str, ...]],
+            tyro.conf.arg(metavar="FILE", help=_SCENARIOS_HELP),
+        ]
+        fields.append(("scenarios", files, dataclasses.field(default=())))
+    return dataclasses.make_dataclass(name, fields, frozen=True)
+
+
+def _split(argv: Sequence[str]) -> tuple[list[str], list[str], _Leaf | _Group, list[str]]:
+    """``argv`` as (global options, command names, the node they name, the rest: the
+    command's options)."""
+    i = 0
+    while i < len(argv) and argv[i].startswith("-"):
+        i += 2 if argv[i] == "--scenarios" else 1
+    start, node = i, cast(_Leaf | _Group, _TREE)
+    while isinstance(node, _Group) and i < len(argv) and argv[i] in node.children:
+        node = node.children[argv[i]]
+        i += 1
+    return list(argv[:start]), list(argv[start:i]), node, list(argv[i:])
+
+
+def _parse(argv: Sequence[str]) -> tuple[Command, tuple[str, ...]]:
+    """The chosen command's options and the ``--scenarios`` files; exits 0 after ``--help``
+    and 2 (one line on stderr) on a bad command line."""
+    head, path, node, rest = _split(argv)
+    prog = " ".join(["pioneer", *path])
+    tree = _tree_type("pioneer", _TREE)
+    if isinstance(node, _Group):  # no command yet: help, or a missing or an unknown one
+        if rest and not rest[0].startswith("-"):
+            _unknown_command(rest[0], node, prog)
+        parse(tree, argv, "pioneer", _TREE.help, label=prog)
+        refuse(expect(prog, "a command", None, f"see {prog} --help"))  # tyro refused already
+    parsed = parse(tree, [*head, *path], "pioneer", _TREE.help)
+    return parse(node.load(), rest, prog), parsed.scenarios
+
+
+def _unknown_command(word: str, group: _Group, prog: str) -> NoReturn:
+    names = list(group.children)
+    near = difflib.get_close_matches(word, names, n=1)
+    fix = f"did you mean {near[0]}? (see {prog} --help)" if near else f"see {prog} --help"
+    refuse(expect(prog, f"a command, one of {', '.join(names)}", word, fix))
+
+
+def _single_threaded_blas() -> None:
+    """The matrices here are small; BLAS threads only fight the simulation and the workers
+    for the cores (a teacher decision takes 3x longer with OpenBLAS's default threads)."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+
+
+def _register_scenario_files(files: Sequence[str]) -> None:
+    """Add ``--scenarios`` files to ``PIONEER_SCENARIOS``, which spawned worker processes
+    inherit, and load them here once (a bad file fails before any work). Without files the
+    simulator is not imported, so robot-side commands (``replay``) stay free of numba."""
+    if files:
+        from pioneer.sim.scenarios import SCENARIOS_ENV, load_env_scenarios
+
+        paths = [str(Path(f).resolve()) for f in files]
+        old = os.environ.get(SCENARIOS_ENV, "")
+        os.environ[SCENARIOS_ENV] = os.pathsep.join([*filter(None, [old]), *paths])
+        load_env_scenarios()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pioneer`` console script: parse, run, and turn any
+    :class:`~pioneer.errors.PioneerError` into one line on stderr and exit code 2."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        command, scenario_files = _parse(args)
+        _single_threaded_blas()
+        _register_scenario_files(scenario_files)
+        return int(command.run())
+    except PioneerError as exc:
+        print(f"pioneer: error: {exc}", file=sys.stderr)
+        return 2

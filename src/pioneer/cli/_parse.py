@@ -1,0 +1,186 @@
+"""tyro, with every refusal of a command line as one line on stderr and exit code 2.
+
+tyro reports a bad command line in a multi-line box. Its parse-error hook (``tyro._errors``,
+private and marked unstable in tyro 1.0) hands the refusal over as data: we word it as the
+house message (``where: expected …, received …; fix: …``) and exit 2, as argparse did. A
+refusal the hook does not describe, or a tyro without the hook, still gives one line: tyro's
+box, caught on stderr and flattened.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import difflib
+import io
+import re
+import sys
+import typing
+from collections.abc import Iterator, Sequence
+from typing import Any, NoReturn, TypeVar
+
+import tyro
+
+from pioneer.errors import expect
+
+try:  # where tyro has the hook; elsewhere its box is flattened (see _flatten)
+    from tyro import _errors as tyro_errors
+except ImportError:  # pragma: no cover - depends on the installed tyro
+    tyro_errors = None  # type: ignore[assignment]
+if not hasattr(tyro_errors, "on_parse_error"):  # pragma: no cover - as above
+    tyro_errors = None  # type: ignore[assignment]
+
+__all__ = ["parse", "refuse"]
+
+T = TypeVar("T")
+
+
+class _Refused(Exception):
+    """Raised from tyro's parse-error hook: the refusal, worded as one line."""
+
+
+def refuse(message: str) -> NoReturn:
+    """Print ``pioneer: error: message`` (one line) and exit 2, as for any bad command line."""
+    print(f"pioneer: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def parse(
+    cls: type[T],
+    args: Sequence[str],
+    prog: str,
+    description: str | None = None,
+    label: str | None = None,
+) -> T:
+    """``tyro.cli(cls)`` over ``args``; ``--help`` prints and exits 0, a bad command line exits 2
+    with one line on stderr (see the module docstring) that names ``label`` (default: prog)."""
+    box = io.StringIO()
+    try:
+        with _hook(cls, args, label or prog), contextlib.redirect_stderr(box):
+            return tyro.cli(cls, args=list(args), prog=prog, description=description)
+    except _Refused as refusal:
+        refuse(str(refusal))
+    except SystemExit as exc:
+        if exc.code in (0, None):
+            raise
+        refuse(_flatten(box.getvalue()) or f"{prog}: the command line was refused; fix: see --help")
+
+
+@contextlib.contextmanager
+def _hook(cls: type, args: Sequence[str], prog: str) -> Iterator[None]:
+    if tyro_errors is None:  # pragma: no cover - depends on the installed tyro
+        yield
+        return
+
+    def hook(event: Any) -> None:
+        try:
+            message = _describe(event, cls, args, prog)
+        except AttributeError:  # another tyro's events: fall back to its box
+            return
+        if message is not None:
+            raise _Refused(message)
+
+    with tyro_errors.on_parse_error(hook):
+        yield
+
+
+def _describe(event: Any, cls: type, args: Sequence[str], prog: str) -> str | None:
+    """The house message for a refusal tyro describes as ``event``; ``None``: use tyro's."""
+    te = tyro_errors
+    if isinstance(event, te.MissingSubcommand):
+        names = ", ".join(event.subcommand_spec.parser_from_name)
+        usage = f"usage: {prog} COMMAND [OPTIONS]; see {prog} --help"
+        return expect(prog, f"a command, one of {names}", None, f"add one ({usage})")
+    if isinstance(event, te.UnrecognizedArgs):
+        return _unrecognized(event.tokens, cls, args, prog)
+    if isinstance(event, te.MissingArgs):
+        name, usage = _usage(event.missing_arguments[0].arg)
+        return expect(f"{prog} {name}", "a value (it is required)", None, f"add {usage}")
+    if isinstance(event, te.InvalidChoice):
+        name, choices = _usage(event.argument)[0], ", ".join(event.choices)
+        return expect(f"{prog} {name}", f"one of {choices}", event.value, f"pick one of {choices}")
+    if isinstance(event, te.BadValue) and event.reason == "too_few_values":
+        name, usage = _usage(event.argument)
+        nargs = event.argument.lowered.nargs
+        wanted = f"{nargs} values" if isinstance(nargs, int) and nargs > 1 else "a value"
+        return expect(f"{prog} {name}", wanted, _given(args, name), f"give {usage}")
+    if isinstance(event, te.InstantiationFailure):
+        if event.argument is None:  # the options refused themselves: the message is ours
+            return str(event.message)
+        name, usage = _usage(event.argument)
+        wanted = f"{event.argument.lowered.metavar or 'a valid value'} ({event.message})"
+        return expect(f"{prog} {name}", wanted, _given(args, name), f"give {usage}")
+    return None
+
+
+def _usage(arg: Any) -> tuple[str, str]:
+    """An argument's name (``--out``, or a positional's) and how to give it (``--out DIR``)."""
+    name, metavar = str(arg.display_name()), str(arg.lowered.metavar or "")
+    if arg.is_positional():
+        return metavar or name.upper(), metavar or name.upper()
+    return name, f"{name} {metavar}".strip()
+
+
+def _unrecognized(tokens: Sequence[str], cls: type, args: Sequence[str], prog: str) -> str:
+    """Unknown options (with the nearest known one as the fix), a value given to a switch
+    (``--lidar=yes``) or values nobody takes."""
+    options = [t.split("=", 1)[0] for t in tokens if t.startswith("-") and not _is_number(t)]
+    if options:
+        known = ["--help", *_flags(cls)]
+        near = difflib.get_close_matches(options[0], known, n=1)
+        fix = f"did you mean {near[0]}? (see {prog} --help)" if near else f"see {prog} --help"
+        received = options[0] if len(options) == 1 else options
+        return expect(prog, "a known option", received, fix)
+    for a in args:
+        switch, _, value = a.partition("=")
+        if a.startswith("--") and value == tokens[0]:
+            return expect(f"{prog} {switch}", "no value (a switch)", value, f"write {switch} alone")
+    if len(tokens) == 1:
+        return expect(prog, "no further values", tokens[0], f"remove it (see {prog} --help)")
+    return expect(prog, "no further values", list(tokens), f"remove them (see {prog} --help)")
+
+
+def _flags(cls: type) -> list[str]:
+    """The ``--flags`` of an options dataclass (those of nested option groups unprefixed)."""
+    if not dataclasses.is_dataclass(cls):
+        return []
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        nested = hints[f.name]
+        if isinstance(nested, type) and dataclasses.is_dataclass(nested):
+            out += _flags(nested)
+        else:
+            out.append("--" + f.name.replace("_", "-"))
+    return out
+
+
+def _given(args: Sequence[str], name: str) -> str | list[str] | None:
+    """The value(s) that follow option ``name`` on the command line (up to the next option)."""
+    for i, a in enumerate(args):
+        if a.startswith(name + "="):
+            return a.split("=", 1)[1]
+        if a == name:
+            values = []
+            for v in args[i + 1 :]:
+                if v.startswith("-") and not _is_number(v):
+                    break
+                values.append(v)
+            return values[0] if len(values) == 1 else values or None
+    return None
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+_BOX = re.compile(r"[╭╮╰╯│─━┃┏┓┗┛]+")
+
+
+def _flatten(text: str) -> str:
+    """tyro's error box as one line: frame characters dropped, whitespace collapsed."""
+    return " ".join(_BOX.sub(" ", text).split())

@@ -1,0 +1,83 @@
+"""``pioneer demos generate|show`` and ``pioneer teleop``: demonstration datasets."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Annotated
+
+import tyro
+
+from pioneer.cli._common import command_line, default, metavar, optional
+from pioneer.demos.generate import generate
+from pioneer.demos.teleop import TeleopSession
+
+__all__ = ["DemosGenerate", "DemosShow", "Teleop"]
+
+
+@dataclasses.dataclass(frozen=True)
+class DemosGenerate:
+    """Scripted demonstrations (γ = +1 and −1) of one scenario, saved as a dataset (.npz)."""
+
+    scenario: str
+    """hr-rl, hl-rr or static"""
+    out: Annotated[str, metavar("FILE")]
+    """output .npz"""
+    positive: Annotated[int | None, optional("N", "the paper's count")] = None
+    """positive samples"""
+    negative: Annotated[int | None, optional("N", "the paper's count")] = None
+    """negative samples"""
+    seed: int = default(generate, "seed")
+    """seed of the first episode"""
+
+    def run(self) -> int:
+        """Generate and save; print the dataset's summary (JSON)."""
+        d = generate(
+            self.scenario, self.positive, self.negative, seed=self.seed, command=command_line()
+        )
+        d.save(self.out)
+        print(json.dumps({"out": self.out, **d.summary()}))
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class DemosShow:
+    """The summary of a dataset file (JSON)."""
+
+    demos: Annotated[str, tyro.conf.Positional, metavar("FILE")]
+    """the dataset (.npz)"""
+
+    def run(self) -> int:
+        """Load and summarise (without the per-feature names and units)."""
+        from pioneer.reward.dataset import Dataset
+
+        d = Dataset.load(self.demos)
+        meta = {k: v for k, v in d.meta.items() if k not in ("feature_names", "units")}
+        print(json.dumps({**d.summary(), "meta": meta}, indent=2))
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Teleop:
+    """Drive with the keyboard and record labelled demos (needs pygame-ce)."""
+
+    out: Annotated[str, metavar("FILE")]
+    """dataset .npz (appended to after every episode)"""
+    scenario: str = "hr-rl"
+    """hr-rl, hl-rr, static, …"""
+    seed: int = default(TeleopSession, "seed")
+    """episode k is seeded seed + k"""
+    max_episodes: Annotated[int | None, optional("N", "until you quit")] = None
+    """stop after this many saved episodes"""
+
+    def run(self) -> int:
+        """Run the session; print its summary (JSON)."""
+        session = TeleopSession(
+            self.scenario,
+            self.out,
+            seed=self.seed,
+            max_episodes=self.max_episodes,
+            command=command_line(),
+        )
+        print(json.dumps(session.run()))
+        return 0

@@ -1,0 +1,205 @@
+"""``pioneer run``, ``pioneer eval``, ``pioneer reproduce``: episodes, evaluations, the paper."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import TYPE_CHECKING, Annotated, Literal, TypeAlias
+
+from pioneer.cli._common import (
+    Ablation,
+    Ablations,
+    Flag,
+    Workers,
+    default,
+    metavar,
+    one_of,
+    optional,
+    policy_spec,
+    require_some,
+)
+from pioneer.errors import ConfigError, expect
+from pioneer.eval.harness import evaluate
+from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+
+if TYPE_CHECKING:
+    from pioneer.control.policy import Policy
+    from pioneer.eval.episode import Trajectory
+    from pioneer.eval.harness import PolicySpec
+    from pioneer.sim.scenarios import ScenarioConfig
+
+    ProfileName: TypeAlias = str
+else:
+    ProfileName = one_of(PROFILES)
+
+__all__ = ["Eval", "Reproduce", "Run"]
+
+_PAPER = PROFILES["paper"]  # the paper's protocol: eval's default seeds × trials
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """Run one episode of a policy and print its record (JSON); optionally draw it."""
+
+    scenario: str = "hr-rl"
+    """hr-rl, hl-rr, static, hr-rl-r03, …"""
+    policy: Annotated[str, metavar("POLICY")] = "goal"
+    """controller NAME or NAME:key=value,… (e.g. student-mdn:checkpoint=PATH)"""
+    seed: int = 0
+    """episode seed"""
+    gif: Annotated[str | None, optional("FILE", "none")] = None
+    """write an animation of the episode here"""
+    png: Annotated[str | None, optional("FILE", "none")] = None
+    """write a trajectory plot here"""
+    lidar: Flag = False
+    """draw the LiDAR rays in the GIF"""
+    ablation: Ablations = dataclasses.field(default_factory=Ablation)
+
+    def run(self) -> int:
+        """One episode; the record is the last line printed."""
+        from pioneer.eval.episode import run_episode
+        from pioneer.sim.scenarios import get_scenario
+
+        scenario = get_scenario(self.scenario)
+        policy = self._policy(scenario.name)
+        rec, traj = run_episode(scenario, policy, seed=self.seed, record=bool(self.gif or self.png))
+        if traj is not None:
+            self._draw(scenario, policy, traj, rec.event)
+        print(json.dumps(rec.to_dict()))
+        return 0
+
+    def _policy(self, scenario: str) -> Policy:
+        from pioneer.control.registry import build_policy
+
+        spec = policy_spec(self.policy)
+        abl = self.ablation.kwargs()
+        if abl and not spec.name.startswith("teacher"):
+            raise ConfigError(
+                expect(
+                    "--no-density/--no-goal/--no-obstacle",
+                    "a teacher policy",
+                    self.policy,
+                    "drop the flags",
+                )
+            )
+        policy = build_policy(spec.name, scenario, **{**dict(spec.kwargs), **abl})
+        if spec.label:
+            policy.name = spec.label
+        if abl:
+            policy.name = spec.row + self.ablation.suffix()
+        return policy
+
+    def _draw(self, scenario: ScenarioConfig, policy: Policy, traj: Trajectory, event: str) -> None:
+        from tqdm import tqdm
+
+        from pioneer.sim.world import scan
+        from pioneer.viz import plot_trajectory, render_frame, save_gif
+
+        world, states = traj.world, traj.states
+        if self.gif:
+            robot = traj.robot
+            frames = []
+            for k, st in enumerate(tqdm(states, desc="frames", unit="f", disable=None)):
+                rays = scan(world, st)[0] if self.lidar else None
+                frames.append(render_frame(world, st, rays, trail=robot[: k + 1, :2]))
+            save_gif(frames, self.gif, fps=1.0 / scenario.sim.dt)
+            print(f"wrote {self.gif}")
+        if self.png:
+            title = f"{scenario.name} · {policy.name} · seed {self.seed} · {event}"
+            plot_trajectory(world, states, self.png, title=title)
+            print(f"wrote {self.png}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Eval:
+    """Evaluate policies: N seeds × M trials per scenario, in parallel, resumable (records in
+    OUT/episodes.jsonl); prints one summary line per row and writes OUT/summary.json."""
+
+    out: Annotated[str, metavar("DIR")]
+    """output folder (episodes.jsonl, summary.json)"""
+    scenario: Annotated[tuple[str, ...], metavar("NAME")] = SCENARIOS
+    """scenario names"""
+    policy: Annotated[tuple[str, ...], metavar("POLICY")] = ("teacher",)
+    """NAME or NAME:key=value,…,label=ROW (e.g. student-mdn:checkpoint=PATH,label=mine)"""
+    seeds: int = _PAPER.seeds
+    """evaluation seeds"""
+    trials: int = _PAPER.trials
+    """episodes per seed"""
+    workers: Workers = None
+    """processes"""
+    backend: Literal["process", "ray"] = default(evaluate, "backend")
+    """where the episodes run"""
+    ray_address: Annotated[str | None, optional("ADDRESS", "start a local Ray")] = None
+    """Ray cluster address"""
+    ablation: Ablations = dataclasses.field(default_factory=Ablation)
+
+    def run(self) -> int:
+        """Evaluate, then print the summary of every row."""
+        from pioneer.eval.metrics import summarize
+        from pioneer.eval.report import write_summary
+
+        require_some("--scenario", self.scenario)
+        require_some("--policy", self.policy)
+        specs = self._specs()
+        recs = evaluate(
+            self.scenario,
+            specs,
+            self.seeds,
+            self.trials,
+            self.out,
+            self.workers,
+            backend=self.backend,
+            ray_address=self.ray_address,
+        )
+        summary = summarize(recs)
+        write_summary(self.out, summary)
+        for key, s in summary.items():
+            print(
+                f"{key}: SR {s['success_rate']['mean']:.1f}%  TT {s['time_mean_s']['mean']:.2f} s"
+                f"  PL {s['path_length_mean_m']['mean']:.2f} m  ({s['episodes']} episodes)"
+            )
+        return 0
+
+    def _specs(self) -> list[PolicySpec]:
+        """The checked policies, the teacher ablated as asked; every row label distinct."""
+        from pioneer.eval.harness import PolicySpec
+
+        abl = self.ablation.kwargs()
+        specs = []
+        for text in self.policy:
+            spec = policy_spec(text)
+            if abl and spec.name == "teacher":
+                kw = {**dict(spec.kwargs), **abl}
+                spec = PolicySpec(
+                    spec.name, tuple(sorted(kw.items())), spec.row + self.ablation.suffix()
+                )
+            specs.append(spec)
+        rows = [s.row for s in specs]
+        twice = sorted({r for r in rows if rows.count(r) > 1})
+        if twice:
+            raise ConfigError(
+                expect(
+                    "--policy rows",
+                    "distinct labels",
+                    twice,
+                    "add label=NAME to the repeated policy",
+                )
+            )
+        return specs
+
+
+@dataclasses.dataclass(frozen=True)
+class Reproduce:
+    """The paper's tables and figures (the main job); prints the summary (JSON)."""
+
+    profile: ProfileName = default(reproduce, "profile")
+    """smoke: 1 episode per row (a pipeline check); quick: 2 × 10; paper: 5 × 100"""
+    out: Annotated[str, metavar("DIR")] = default(reproduce, "out_dir")
+    """output folder"""
+    workers: Workers = None
+    """processes"""
+
+    def run(self) -> int:
+        """Reproduce, then print what was written."""
+        print(json.dumps(reproduce(self.profile, self.out, self.workers), indent=2))
+        return 0

@@ -1,0 +1,157 @@
+"""``pioneer distill`` (DAgger students) and ``pioneer train crowdnav++`` (the PPO baseline).
+
+Every default is the one of the config the options fill (``DaggerConfig``, ``PPOConfig``,
+``WarmStartConfig``) or of the function they are passed to, read with
+:func:`~pioneer.cli._common.default`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import TYPE_CHECKING, Annotated, TypeAlias
+
+from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
+from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
+from pioneer.cli._common import Flag, Workers, command_line, default, metavar, one_of, optional
+from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
+
+if TYPE_CHECKING:
+    Student: TypeAlias = str
+    ActionMode: TypeAlias = str
+    LabelPrev: TypeAlias = str
+    Expert: TypeAlias = str
+else:
+    Student = one_of(("mdn", "mlp"))
+    ActionMode = one_of(ACTION_MODES)
+    LabelPrev = one_of(LABEL_PREV)
+    Expert = one_of(EXPERTS)
+
+__all__ = ["Distill", "TrainCrowdNav"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Distill:
+    """DAgger: distil the teacher into a LiDAR-only student (resumes an existing --out)."""
+
+    out: Annotated[str, metavar("DIR")]
+    """output folder (resumes if it exists)"""
+    scenario: str = default(DaggerConfig, "scenario")
+    """hr-rl, hl-rr, …"""
+    student: Student = default(DaggerConfig, "student")
+    """the student network"""
+    action_mode: ActionMode = default(DaggerConfig, "action_mode")
+    """MDN's executed action"""
+    nll_beta: float = default(DaggerConfig, "nll_beta")
+    """MDN's β-NLL exponent in [0, 1]"""
+    label_prev: LabelPrev = default(DaggerConfig, "label_prev")
+    """u_{t-1} in the teacher's smoothed label on student-driven steps"""
+    teacher_episodes: int = default(DaggerConfig, "teacher_episodes")
+    """round 0 episodes"""
+    rounds: int = default(DaggerConfig, "rounds")
+    """student-driven rounds"""
+    episodes_per_round: int = default(DaggerConfig, "episodes_per_round")
+    """episodes of every later round"""
+    epochs_initial: int = default(DaggerConfig, "epochs_initial")
+    """epochs after round 0"""
+    epochs_per_round: int = default(DaggerConfig, "epochs_per_round")
+    """epochs after later rounds"""
+    seed: int = default(DaggerConfig, "seed")
+    """seeds the networks and the DAgger episodes"""
+    workers: Workers = None
+    """processes collecting episodes"""
+    reward: Annotated[str | None, optional("FILE", "fit on the shipped demos")] = None
+    """teacher reward model .npz"""
+
+    def run(self) -> int:
+        """Run (or resume) DAgger; print where the student is."""
+        cfg = DaggerConfig(
+            scenario=self.scenario,
+            student=self.student,
+            action_mode=self.action_mode,
+            nll_beta=self.nll_beta,
+            label_prev=self.label_prev,
+            teacher_episodes=self.teacher_episodes,
+            rounds=self.rounds,
+            episodes_per_round=self.episodes_per_round,
+            epochs_initial=self.epochs_initial,
+            epochs_per_round=self.epochs_per_round,
+            seed=self.seed,
+        )
+        res = run_dagger(cfg, self.out, self.workers, reward=self.reward)
+        last = res.curves[-1]
+        print(
+            f"student: {res.student}  ({last['frames_total']} frames, last round SR "
+            f"{100 * last['success_rate']:.0f}%); curves: {res.out / 'curves.png'}"
+        )
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainCrowdNav:
+    """CrowdNav++ with PPO, optionally warm-started by imitation (resumes an existing --out)."""
+
+    out: Annotated[str, metavar("DIR")]
+    """output folder (checkpoint, policy, curve)"""
+    scenario: str = "hr-rl"
+    """hr-rl, hl-rr, …"""
+    steps: int = default(PPOConfig, "total_steps")
+    """total environment steps"""
+    envs: int = default(PPOConfig, "n_envs")
+    """environments stepped together"""
+    seed: int = default(PPOConfig, "seed")
+    """seeds the weights, the action noise, the minibatches and the episodes"""
+    lr: float = default(PPOConfig, "lr")
+    """Adam learning rate"""
+    entropy_coef: float = default(PPOConfig, "entropy_coef")
+    """PPO entropy bonus"""
+    bc_episodes: int = default(WarmStartConfig, "bc_episodes")
+    """expert demonstrations to imitate first (0: no imitation)"""
+    bc_expert: Expert = default(WarmStartConfig, "expert")
+    """the demonstrator (sfm, dwa: independent of PioneeR; teacher: PioneeR's own)"""
+    bc_epochs: int = default(WarmStartConfig, "bc_epochs")
+    """behaviour-cloning epochs"""
+    dagger_rounds: int = default(WarmStartConfig, "dagger_rounds")
+    """DAgger rounds after cloning"""
+    dagger_episodes: int = default(WarmStartConfig, "dagger_episodes")
+    """episodes per DAgger round"""
+    critic_warmup: int = default(WarmStartConfig, "critic_warmup")
+    """[updates] critic-only updates before PPO"""
+    checkpoint_every: int = default(PPOConfig, "checkpoint_every")
+    """[updates] between checkpoints"""
+    threads: int = default(train_crowdnav, "torch_threads")
+    """torch threads"""
+    resume: Flag = False
+    """require a checkpoint in --out (default: resume if there is one)"""
+
+    def run(self) -> int:
+        """Train (or resume); print the outputs and the final statistics (JSON lines)."""
+        ppo = PPOConfig(
+            total_steps=self.steps,
+            n_envs=self.envs,
+            lr=self.lr,
+            entropy_coef=self.entropy_coef,
+            seed=self.seed,
+            checkpoint_every=self.checkpoint_every,
+        )
+        warm = WarmStartConfig(
+            expert=self.bc_expert,
+            bc_episodes=self.bc_episodes,
+            bc_epochs=self.bc_epochs,
+            dagger_rounds=self.dagger_rounds,
+            dagger_episodes=self.dagger_episodes,
+            critic_warmup=self.critic_warmup,
+        )
+        summary = train_crowdnav(
+            self.scenario,
+            self.out,
+            ppo,
+            warm=warm,
+            resume=True if self.resume else None,
+            command=command_line(),
+            torch_threads=self.threads,
+        )
+        print(json.dumps({"out": self.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
+        print(json.dumps({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+        return 0

@@ -1,0 +1,158 @@
+"""``pioneer reward fit|show`` (the learned density reward) and ``pioneer study static``
+(paper Fig. 3, the reward on the synthetic static study).
+
+The fit's defaults are ``DensityConfig``'s, read with :func:`~pioneer.cli._common.default`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import TYPE_CHECKING, Annotated, Any, TypeAlias
+
+from pioneer.cli._common import Flag, default, metavar, one_of, optional
+from pioneer.data import DEMOS_DIR
+from pioneer.reward.density import INDUCING, DensityConfig
+from pioneer.reward.features import FEATURE_MAPS
+
+if TYPE_CHECKING:
+    from pioneer.reward.density import DensityReward
+
+    Features: TypeAlias = str
+    Inducing: TypeAlias = str
+else:
+    Features = one_of(FEATURE_MAPS)
+    Inducing = one_of(INDUCING)
+
+__all__ = ["RewardFit", "RewardShow", "StudyStatic"]
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardFit:
+    """Fit the density reward on a dataset and save the model (.npz); prints a summary."""
+
+    demos: Annotated[str, metavar("FILE")]
+    """the dataset (.npz)"""
+    out: Annotated[str, metavar("FILE")]
+    """output model .npz"""
+    features: Annotated[Features | None, optional("{xy,obs_action}", "by scenario")] = None
+    """the feature map"""
+    length_scale: Annotated[float | None, optional("L", "the median heuristic")] = default(
+        DensityConfig, "length_scale"
+    )
+    """l in standardised units"""
+    select_length: Flag = False
+    """pick l by held-out AUROC"""
+    lam: float = default(DensityConfig, "lam")
+    """λ, weight of the RKHS-norm regulariser"""
+    beta: float = default(DensityConfig, "beta")
+    """β, weight of the coefficient-norm regulariser"""
+    max_inducing: int = default(DensityConfig, "max_inducing")
+    """above this many demos, choose a subset of inducing points"""
+    inducing: Inducing = default(DensityConfig, "inducing")
+    """how the subset is chosen: k-means medoids or farthest-point sampling"""
+    min_gamma: Annotated[float | None, optional("G", "keep all")] = None
+    """drop samples with γ below this"""
+
+    def run(self) -> int:
+        """Fit (selecting l if asked) and save."""
+        from pioneer.reward.dataset import Dataset
+        from pioneer.reward.density import DensityReward
+        from pioneer.reward.features import default_feature_map, feature_map
+        from pioneer.reward.select import select_length_scale
+
+        d = Dataset.load(self.demos)
+        if self.min_gamma is not None:
+            d = d.filter(min_gamma=self.min_gamma)
+        fm = feature_map(self.features or default_feature_map(d.scenarios))
+        z = fm.from_dataset(d)
+        cfg = DensityConfig(
+            length_scale=self.length_scale,
+            lam=self.lam,
+            beta=self.beta,
+            max_inducing=self.max_inducing,
+            inducing=self.inducing,
+        )
+        records = None
+        if self.select_length:
+            length, records = select_length_scale(z, d.gamma, d.episode, cfg)
+            cfg = cfg.replace(length_scale=length)
+        model = DensityReward(cfg).fit(z, d.gamma, list(fm.names))
+        model.info_.update({"demos": str(self.demos), "features": fm.name})
+        if records is not None:
+            model.info_["length_selection"] = records
+        model.save(self.out)
+        fitted = {"length_scale": model.length_, "scale": model.scale_, "n_train": model.n_train_}
+        print(json.dumps({"out": self.out, **fitted, **model.info_}))
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardShow:
+    """The summary of a fitted model, scored on a dataset (JSON)."""
+
+    model: Annotated[str, metavar("FILE")]
+    """the fitted model (.npz)"""
+    demos: Annotated[str | None, optional("FILE", "the training set")] = None
+    """dataset to score"""
+
+    def run(self) -> int:
+        """Load, score and print."""
+        from pioneer.reward.density import DensityReward
+
+        m = DensityReward.load(self.model)
+        out: dict[str, Any] = {
+            "model": self.model,
+            "features": m.info_.get("features", "?"),
+            "feature_dim": len(m.feature_names),
+            "n_train": m.n_train_,
+            "n_inducing": int(m.alpha_.shape[0]) if m.alpha_ is not None else 0,
+            "length_scale": m.length_,
+            "scale": m.scale_,
+            "hyperparameters": m.config.to_dict(),
+        }
+        demos = self.demos or m.info_.get("demos")
+        if demos:
+            out.update(_scores(m, str(demos)))
+        print(json.dumps(out, indent=2))
+        return 0
+
+
+def _scores(m: DensityReward, demos: str) -> dict[str, Any]:
+    """Mean reward of the positives and the negatives of ``demos``, and the AUROC between."""
+    import numpy as np
+
+    from pioneer.reward.dataset import Dataset
+    from pioneer.reward.features import default_feature_map, feature_map
+    from pioneer.stats import auroc
+
+    d = Dataset.load(demos)
+    fm = feature_map(str(m.info_.get("features", default_feature_map(d.scenarios))))
+    r = m(fm.from_dataset(d))
+    pos, neg = d.gamma > 0, d.gamma < 0
+    return {
+        "demos": demos,
+        "reward_positive_mean": float(np.mean(r[pos])) if pos.any() else None,
+        "reward_negative_mean": float(np.mean(r[neg])) if neg.any() else None,
+        "auroc_pos_vs_neg": auroc(r[pos | neg], pos[pos | neg]),
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyStatic:
+    """The synthetic static study (paper Fig. 3): rewards fitted on positives only and on
+    positives + negatives, and teacher runs; prints the summary (JSON)."""
+
+    out: Annotated[str, metavar("DIR")]
+    """output folder"""
+    demos: Annotated[str, metavar("FILE")] = str(DEMOS_DIR / "static.npz")
+    """static-study demos"""
+
+    def run(self) -> int:
+        """Run the study."""
+        from pioneer.experiments.static_study import run_static_study
+        from pioneer.reward.dataset import Dataset
+
+        summary = run_static_study(Dataset.load(self.demos), self.out)
+        print(json.dumps(summary, indent=2))
+        return 0

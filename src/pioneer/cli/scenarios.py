@@ -1,0 +1,93 @@
+"""``pioneer scenarios`` (list and draw the worlds) and ``pioneer calibrate`` (their
+statistics beside the paper's evidence)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+from pioneer.cli._common import Workers, default, metavar, optional, require_some
+from pioneer.experiments.calibration import calibrate
+from pioneer.experiments.reproduce import SCENARIOS
+
+if TYPE_CHECKING:
+    from pioneer.sim.scenarios import ScenarioConfig
+
+__all__ = ["Calibrate", "Scenarios"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenarios:
+    """List the scenarios (built-in and from --scenarios files); optionally draw each."""
+
+    png_dir: Annotated[str | None, optional("DIR", "draw none")] = None
+    """write one PNG per scenario (its layout and a start state)"""
+    seed: int = 0
+    """seed of the drawn start state"""
+
+    def run(self) -> int:
+        """Print one row per scenario; draw them if asked."""
+        from pioneer.data import base_scenario
+        from pioneer.sim.scenarios import get_scenario, scenario_names
+
+        configs = {name: get_scenario(name) for name in scenario_names()}
+        head = f"{'scenario':<24} {'learned parts of':<16} {'humans':>6} {'map [m]':>11}"
+        print(f"{head} {'limit [s]':>9}")
+        for name, cfg in configs.items():
+            xmin, xmax, ymin, ymax = cfg.bounds
+            size = f"{xmax - xmin:.1f} × {ymax - ymin:.1f}"
+            print(
+                f"{name:<24} {base_scenario(name):<16} {len(cfg.humans):>6} {size:>11} "
+                f"{cfg.sim.time_limit:>9.1f}"
+            )
+        if self.png_dir:
+            self._draw(configs, Path(self.png_dir))
+        return 0
+
+    def _draw(self, configs: dict[str, ScenarioConfig], out: Path) -> None:
+        import numpy as np
+        from tqdm import tqdm
+
+        from pioneer.sim.scenarios import sample_state
+        from pioneer.viz import plot_trajectory
+
+        out.mkdir(parents=True, exist_ok=True)
+        for name, cfg in tqdm(configs.items(), desc="layouts", unit="png", disable=None):
+            state = sample_state(cfg, np.random.default_rng(self.seed))
+            title = f"{name} · initial state, seed {self.seed}"
+            plot_trajectory(cfg.world(), [state], out / f"{name}.png", title=title)
+        print(f"wrote {len(configs)} layouts to {out}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Calibrate:
+    """World statistics beside the paper's evidence, on validation seeds (writes
+    OUT/calibration.json)."""
+
+    out: Annotated[str, metavar("DIR")]
+    """folder for calibration.json"""
+    scenario: Annotated[tuple[str, ...], metavar("NAME")] = SCENARIOS
+    """hr-rl hl-rr …"""
+    episodes: int = default(calibrate, "episodes")
+    """validation episodes per scenario"""
+    workers: Workers = None
+    """processes"""
+    driver: str = default(calibrate, "driver")
+    """policy behind the teacher_* statistics"""
+
+    def run(self) -> int:
+        """Calibrate; print one line of statistics per scenario (OUT: outside the band)."""
+        from pioneer.experiments.calibration import BANDS
+
+        require_some("--scenario", self.scenario)
+        res = calibrate(self.scenario, self.episodes, self.out, self.workers, driver=self.driver)
+        for name, st in res["scenarios"].items():
+            cells = []
+            for key in (*BANDS, "teacher_risky_frame_share_gap", "risky_at_start_share"):
+                lo_hi = BANDS.get(key)
+                mark = "" if lo_hi is None else (" ok" if st["within_band"][key] else " OUT")
+                cells.append(f"{key} {st[key]:.3g}{mark}")
+            print(f"{name}: " + "; ".join(cells))
+        print(f"wrote {Path(self.out) / 'calibration.json'} ({res['elapsed_s']:.0f} s)")
+        return 0

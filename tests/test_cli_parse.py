@@ -1,0 +1,179 @@
+"""The ``pioneer`` command line itself (tyro): ``--help`` everywhere, defaults read from the
+configs, and every bad command line as one line on stderr with exit code 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from pioneer.baselines.crowdnav.imitation import WarmStartConfig
+from pioneer.baselines.crowdnav.ppo import PPOConfig
+from pioneer.cli import main
+from pioneer.learn.dagger import DaggerConfig
+from pioneer.reward.density import DensityConfig
+from pioneer_testutils import assert_house_message
+
+COMMANDS = [
+    ["run"],
+    ["scenarios"],
+    ["eval"],
+    ["reproduce"],
+    ["calibrate"],
+    ["distill"],
+    ["export"],
+    ["replay"],
+    ["train", "crowdnav++"],
+    ["demos", "generate"],
+    ["demos", "show"],
+    ["teleop"],
+    ["reward", "fit"],
+    ["reward", "show"],
+    ["study", "static"],
+]
+GROUPS = [[], ["train"], ["demos"], ["reward"], ["study"]]
+
+
+def _exit_code(argv: list[str]) -> int:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    return int(exc.value.code or 0)
+
+
+@pytest.mark.parametrize("path", GROUPS, ids=lambda p: " ".join(["pioneer", *p]))
+def test_help_of_the_tree_lists_the_commands(path, capsys):
+    assert _exit_code([*path, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: {' '.join(['pioneer', *path])} ")
+    below = [c[len(path)] for c in COMMANDS if c[: len(path)] == path]
+    assert below and all(name in out for name in below)
+    if not path:
+        assert "--scenarios FILE" in out
+
+
+@pytest.mark.parametrize("path", COMMANDS, ids=" ".join)
+def test_help_of_every_command_lists_its_defaults(path, capsys):
+    assert _exit_code([*path, "--help"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"usage: {' '.join(['pioneer', *path])} ")
+    assert "(default: " in captured.out or "(required)" in captured.out
+    assert captured.err == ""
+
+
+def test_help_shows_the_config_defaults(capsys):
+    assert _exit_code(["distill", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert f"(default: {DaggerConfig().teacher_episodes})" in out
+    assert "{mdn,mlp}" in out and "{applied,teacher}" in out
+    assert _exit_code(["train", "crowdnav++", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert f"(default: {PPOConfig().total_steps})" in out and "{sfm,dwa,teacher}" in out
+
+
+def test_distill_defaults_are_the_dagger_config(monkeypatch, tmp_path):
+    import pioneer.cli.learning as learning
+
+    seen = {}
+
+    def fake_run_dagger(cfg, out, workers, reward=None):
+        seen.update(cfg=cfg, workers=workers, reward=reward)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(learning, "run_dagger", fake_run_dagger)
+    with pytest.raises(RuntimeError, match="stop here"):
+        main(["distill", "--out", str(tmp_path / "d")])
+    assert seen == {"cfg": DaggerConfig(), "workers": None, "reward": None}
+
+
+def test_train_defaults_are_the_ppo_and_warm_start_configs(monkeypatch, tmp_path):
+    import pioneer.cli.learning as learning
+
+    seen = {}
+
+    def fake_train(scenario, out, ppo, warm, resume, command, torch_threads):
+        seen.update(ppo=ppo, warm=warm, resume=resume, threads=torch_threads)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(learning, "train_crowdnav", fake_train)
+    with pytest.raises(RuntimeError, match="stop here"):
+        main(["train", "crowdnav++", "--out", str(tmp_path / "t")])
+    assert seen == {"ppo": PPOConfig(), "warm": WarmStartConfig(), "resume": None, "threads": 1}
+
+
+def test_reward_fit_defaults_are_the_density_config():
+    from pioneer.cli.reward import RewardFit
+
+    fit = RewardFit(demos="d.npz", out="m.npz")
+    names = ("length_scale", "lam", "beta", "max_inducing", "inducing")
+    assert DensityConfig(**{n: getattr(fit, n) for n in names}) == DensityConfig()
+
+
+@pytest.mark.parametrize(
+    ("argv", "needles"),
+    [
+        ([], ["a command", "usage: pioneer"]),
+        (["evl"], ["'evl'", "did you mean eval?"]),
+        (["train"], ["pioneer train", "crowdnav++"]),
+        (["train", "ppo"], ["pioneer train", "'ppo'"]),
+        (["--scenarios"], ["--scenarios", "FILE"]),
+        (["--verbose", "run"], ["'--verbose'"]),
+        (["eval"], ["--out", "required", "add --out DIR"]),
+        (["eval", "--out", "x", "--sedes", "3"], ["'--sedes'", "did you mean --seeds?"]),
+        (["eval", "--out", "x", "--seeds", "many"], ["--seeds", "INT", "'many'"]),
+        (["eval", "--out", "x", "--backend", "slurm"], ["--backend", "process, ray", "'slurm'"]),
+        (["reproduce", "--profile", "fast"], ["--profile", "smoke, quick, paper", "'fast'"]),
+        (["distill", "--out", "x", "--student", "cnn"], ["--student", "mdn, mlp"]),
+        (["replay", "--bag", "b", "--model", "m", "--out", "o", "--goal", "1"], ["--goal X Y"]),
+        (["demos", "show"], ["FILE", "required"]),
+        (["demos", "show", "a.npz", "b.npz"], ["'b.npz'"]),
+        (["run", "--lidar=yes"], ["'yes'"]),
+    ],
+)
+def test_a_bad_command_line_is_one_line_and_exit_2(argv, needles, capsys, tmp_path):
+    assert _exit_code(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip("\n").splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith("pioneer: error: ")
+    assert_house_message(lines[0], *needles)
+    assert captured.out == ""
+
+
+def test_without_tyros_hook_a_refusal_is_still_one_line(monkeypatch, capsys):
+    import pioneer.cli._parse as parse
+
+    monkeypatch.setattr(parse, "tyro_errors", None)
+    assert _exit_code(["eval", "--out", "x", "--seeds", "many"]) == 2
+    lines = capsys.readouterr().err.strip("\n").splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pioneer: error: ")
+    assert "--seeds" in lines[0] and "many" in lines[0] and "│" not in lines[0]
+
+
+def test_an_unknown_scenario_is_one_line_and_writes_nothing(tmp_path):
+    out = tmp_path / "x"
+    argv = ["eval", "--scenario", "nope", "--policy", "teacher", "--out", str(out)]
+    proc = subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 2
+    lines = proc.stderr.strip("\n").splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pioneer: error: ")
+    assert_house_message(lines[0], "scenario", "nope")
+    assert proc.stdout == "" and not out.exists()
+
+
+def test_python_dash_m_help():
+    proc = subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: pioneer ")
+    assert "reproduce" in proc.stdout and proc.stderr == ""
