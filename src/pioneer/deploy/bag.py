@@ -49,6 +49,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 CSV_COLUMNS = ("stamp_s", "bag_time_s", "v", "omega", "aleatoric", "epistemic")
 INSTALL_HINT = "pip install 'pioneer-nav[ros]'"
 GOAL_FRAMES = ("robot", "odom")
+_BAG_FIX = "check that it is a complete ROS 1 .bag or ROS 2 bag directory"
 
 
 def goal_in_robot_frame(
@@ -106,6 +107,110 @@ def _pick_topic(
     return found[0]
 
 
+def _check_goal(goal: Sequence[float], goal_frame: str) -> tuple[float, float]:
+    if goal_frame not in GOAL_FRAMES:
+        raise ConfigError(expect("goal_frame", f"one of {GOAL_FRAMES}", goal_frame, "use 'robot'"))
+    g = tuple(float(c) for c in goal)
+    if len(g) != 2 or not all(math.isfinite(c) for c in g):
+        raise ConfigError(expect("goal", "finite (x, y) [m]", list(goal), "pass --goal X Y"))
+    return g[0], g[1]
+
+
+def _runtime(model_onnx: str | Path | StudentRuntime, lidar: LidarConfig | None) -> StudentRuntime:
+    if not isinstance(model_onnx, StudentRuntime):
+        return StudentRuntime(model_onnx, lidar=lidar)
+    if lidar is not None:
+        raise ConfigError(
+            expect("lidar", "None with a ready StudentRuntime", lidar, "set it on the runtime")
+        )
+    return model_onnx
+
+
+def _check_bag(bag: Path) -> None:
+    if not bag.exists():
+        raise DataError(
+            expect(
+                "ROS bag",
+                "a .bag file (ROS 1) or a bag directory (ROS 2)",
+                str(bag),
+                "check the path",
+            )
+        )
+
+
+def _open_reader(bag: Path) -> Any:
+    """An open rosbags ``AnyReader`` on ``bag``; DataError/ConfigError on failure."""
+    try:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:
+        raise ConfigError(
+            expect("bag replay", "rosbags installed", f"ImportError ({exc})", INSTALL_HINT)
+        ) from exc
+    try:
+        reader = AnyReader([bag], default_typestore=get_typestore(Stores.LATEST))
+        reader.open()
+    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
+        raise DataError(
+            expect(f"ROS bag {bag}", "a readable bag", _one_line(exc), _BAG_FIX)
+        ) from exc
+    return reader
+
+
+def _command_row(msg: Any, t_ns: int, d: Any) -> tuple[str, ...]:
+    stamp = msg.header.stamp
+    return (
+        _seconds(stamp.sec, stamp.nanosec),
+        _seconds(t_ns // 1_000_000_000, t_ns % 1_000_000_000),
+        repr(d.v),
+        repr(d.omega),
+        repr(d.aleatoric),
+        repr(d.epistemic),
+    )
+
+
+def _replay_messages(
+    reader: Any,
+    runtime: StudentRuntime,
+    out: Any,
+    topics: tuple[str, str | None],
+    goal: tuple[float, float],
+    bag: Path,
+    bar: Any,
+) -> tuple[int, int, int]:
+    """Write one CSV row per scan of ``topics[0]``; returns (scans, rows, skipped)."""
+    scan, odom = topics
+    conns = [c for c in reader.connections if c.topic in (scan, odom)]
+    rows, skipped, k = 0, 0, 0
+    pose: tuple[float, float, float] | None = None
+    for con, t_ns, raw in reader.messages(connections=conns):
+        msg: Any = reader.deserialize(raw, con.msgtype)
+        if con.topic == odom:
+            p = msg.pose.pose
+            pose = (float(p.position.x), float(p.position.y), _yaw(p.orientation))
+            continue
+        k += 1
+        bar.update(1)
+        if odom is not None and pose is None:
+            skipped += 1
+            continue
+        goal_robot = goal_in_robot_frame(goal, *pose) if pose is not None else goal
+        try:
+            d = runtime.step(
+                msg.ranges,
+                float(msg.angle_min),
+                float(msg.angle_increment),
+                float(msg.range_max),
+                goal_robot,
+                range_min=float(msg.range_min),
+            )
+        except PioneerError as exc:  # name the message; the cause says what and fix
+            raise DataError(f"{bag}: {scan} message {k} (bag time {t_ns} ns): {exc}") from exc
+        out.writerow(_command_row(msg, t_ns, d))
+        rows += 1
+    return k, rows, skipped
+
+
 def replay_bag(
     bag_path: str | Path,
     model_onnx: str | Path | StudentRuntime,
@@ -131,43 +236,13 @@ def replay_bag(
     Raises :class:`DataError` for a missing or unreadable bag, no (or several) LaserScan
     topics, or a malformed scan; :class:`ConfigError` for a bad goal or goal frame.
     """
-    if goal_frame not in GOAL_FRAMES:
-        raise ConfigError(expect("goal_frame", f"one of {GOAL_FRAMES}", goal_frame, "use 'robot'"))
-    g = tuple(float(c) for c in goal)
-    if len(g) != 2 or not all(math.isfinite(c) for c in g):
-        raise ConfigError(expect("goal", "finite (x, y) [m]", list(goal), "pass --goal X Y"))
+    g = _check_goal(goal, goal_frame)
     bag = Path(bag_path)
-    if not bag.exists():
-        raise DataError(
-            expect(
-                "ROS bag",
-                "a .bag file (ROS 1) or a bag directory (ROS 2)",
-                str(bag),
-                "check the path",
-            )
-        )
-    if isinstance(model_onnx, StudentRuntime):
-        if lidar is not None:
-            raise ConfigError(
-                expect("lidar", "None with a ready StudentRuntime", lidar, "set it on the runtime")
-            )
-        runtime = model_onnx
-    else:
-        runtime = StudentRuntime(model_onnx, lidar=lidar)
-    try:
-        from rosbags.highlevel import AnyReader, AnyReaderError
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError as exc:
-        raise ConfigError(
-            expect("bag replay", "rosbags installed", f"ImportError ({exc})", INSTALL_HINT)
-        ) from exc
+    _check_bag(bag)
+    runtime = _runtime(model_onnx, lidar)
+    reader = _open_reader(bag)
+    from rosbags.highlevel import AnyReaderError
 
-    fix = "check that it is a complete ROS 1 .bag or ROS 2 bag directory"
-    try:
-        reader = AnyReader([bag], default_typestore=get_typestore(Stores.LATEST))
-        reader.open()
-    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
-        raise DataError(expect(f"ROS bag {bag}", "a readable bag", _one_line(exc), fix)) from exc
     try:
         topics = {c.topic: c.msgtype for c in reader.connections}
         scan = _pick_topic(topics, LASER_SCAN, scan_topic, "--scan-topic", bag)
@@ -176,10 +251,7 @@ def replay_bag(
             if goal_frame == "odom"
             else None
         )
-        conns = [c for c in reader.connections if c.topic in (scan, odom)]
-        n_scans = sum(c.msgcount for c in conns if c.topic == scan)
-        rows, skipped, k = 0, 0, 0
-        pose: tuple[float, float, float] | None = None
+        n_scans = sum(c.msgcount for c in reader.connections if c.topic == scan)
         with (
             atomic_path(Path(out_csv)) as tmp,
             tmp.open("w", newline="") as fh,
@@ -189,48 +261,11 @@ def replay_bag(
         ):
             out = csv.writer(fh)
             out.writerow(CSV_COLUMNS)
-            for con, t_ns, raw in reader.messages(connections=conns):
-                msg: Any = reader.deserialize(raw, con.msgtype)
-                if con.topic == odom:
-                    p = msg.pose.pose
-                    pose = (float(p.position.x), float(p.position.y), _yaw(p.orientation))
-                    continue
-                k += 1
-                bar.update(1)
-                if goal_frame == "odom":
-                    if pose is None:
-                        skipped += 1
-                        continue
-                    goal_robot = goal_in_robot_frame(g, *pose)
-                else:
-                    goal_robot = (g[0], g[1])
-                try:
-                    d = runtime.step(
-                        msg.ranges,
-                        float(msg.angle_min),
-                        float(msg.angle_increment),
-                        float(msg.range_max),
-                        goal_robot,
-                        range_min=float(msg.range_min),
-                    )
-                except PioneerError as exc:  # name the message; the cause says what and fix
-                    raise DataError(
-                        f"{bag}: {scan} message {k} (bag time {t_ns} ns): {exc}"
-                    ) from exc
-                stamp = msg.header.stamp
-                out.writerow(
-                    (
-                        _seconds(stamp.sec, stamp.nanosec),
-                        _seconds(t_ns // 1_000_000_000, t_ns % 1_000_000_000),
-                        repr(d.v),
-                        repr(d.omega),
-                        repr(d.aleatoric),
-                        repr(d.epistemic),
-                    )
-                )
-                rows += 1
+            k, rows, skipped = _replay_messages(reader, runtime, out, (scan, odom), g, bag, bar)
     except AnyReaderError as exc:
-        raise DataError(expect(f"ROS bag {bag}", "readable messages", _one_line(exc), fix)) from exc
+        raise DataError(
+            expect(f"ROS bag {bag}", "readable messages", _one_line(exc), _BAG_FIX)
+        ) from exc
     finally:
         reader.close()
     return {

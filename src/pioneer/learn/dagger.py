@@ -329,6 +329,83 @@ def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
     plot_dagger_curves(rows, out / "curves.png")
 
 
+def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> Path:
+    """Check ``out`` against ``cfg`` (resume) and return the teacher's reward file."""
+    from pioneer.sim.scenarios import get_scenario
+
+    get_scenario(cfg.scenario)  # fail early on an unknown scenario
+    out.mkdir(parents=True, exist_ok=True)
+    _check_config(out, cfg)
+    _check_scenario(out, cfg.scenario)
+    reward_path = Path(reward) if reward is not None else out / "reward.npz"
+    if reward is None and not reward_path.exists():
+        from pioneer.reward.default import default_reward
+
+        default_reward(cfg.scenario).save(reward_path)
+    return reward_path
+
+
+def _round_tasks(
+    cfg: DaggerConfig, out: Path, reward_path: Path, rnd: int
+) -> list[tuple[str, str, str | None, int, str, str]]:
+    """The episodes of round ``rnd`` not yet on disk, as :func:`_collect_task` arguments."""
+    prev_ckpt = None if rnd == 0 else str(_round_dir(out, rnd - 1) / FINAL_FILE)
+    return [
+        (
+            cfg.scenario,
+            str(reward_path),
+            prev_ckpt,
+            dagger_seed(cfg.scenario, cfg.seed, rnd, i),
+            str(_episode_path(out, rnd, i)),
+            cfg.label_prev,
+        )
+        for i in range(cfg.episodes_in(rnd))
+        if not _episode_path(out, rnd, i).exists()
+    ]
+
+
+def _fit_round(
+    model: Student | None,
+    cfg: DaggerConfig,
+    rnd: int,
+    ckpt: Path,
+    data: tuple[NDArray[np.float32], NDArray[np.float32]],
+) -> tuple[Student, list[float]]:
+    """The round's student (loaded if ``ckpt`` exists, else trained on the aggregate ``data``)
+    and its loss history."""
+    if ckpt.exists():
+        return load_student(ckpt), [float(v) for v in json_info(ckpt).get("loss_history", [])]
+    if model is None:
+        model = build_student(
+            StudentConfig(kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta),
+            seed=cfg.seed,
+        )
+    epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
+    if epochs <= 0:
+        return model, []
+    x, y = data
+    return model, train_student(
+        model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
+    )
+
+
+def _curve_row(
+    rnd: int, eps: list[dict[str, Any]], frames: int, held_out: float, history: list[float]
+) -> dict[str, Any]:
+    events = [str(e["event"]) for e in eps]
+    return {
+        "round": rnd,
+        "driver": "teacher" if rnd == 0 else "student",
+        "episodes": len(eps),
+        "frames_total": frames,
+        "success_rate": events.count("success") / len(events),
+        "collision_rate": events.count("collision") / len(events),
+        "mean_time_s": float(np.mean([float(e["time_s"]) for e in eps])),
+        "loss_new_data": held_out,
+        "train_loss": history[-1] if history else math.nan,
+    }
+
+
 def run_dagger(
     config: DaggerConfig,
     out_dir: str | Path,
@@ -342,19 +419,9 @@ def run_dagger(
     ``reward``: the teacher's density-reward file; default the reward fitted on the shipped
     demonstrations of the scenario (saved to ``DIR/reward.npz``).
     """
-    from pioneer.sim.scenarios import get_scenario
-
     cfg = config
-    get_scenario(cfg.scenario)  # fail early on an unknown scenario
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    _check_config(out, cfg)
-    _check_scenario(out, cfg.scenario)
-    reward_path = Path(reward) if reward is not None else out / "reward.npz"
-    if reward is None and not reward_path.exists():
-        from pioneer.reward.default import default_reward
-
-        default_reward(cfg.scenario).save(reward_path)
+    reward_path = _prepare(cfg, out, reward)
     n_workers = workers or os.cpu_count() or 1
     # Train on one thread: float32 sums depend on the thread count, and the weights must not
     # depend on --workers or the machine (the networks are small; threads gain little).
@@ -369,26 +436,12 @@ def run_dagger(
     curves: list[dict[str, Any]] = []
     agg_obs: list[NDArray[np.float32]] = []
     agg_act: list[NDArray[np.float32]] = []
-    model = None
+    model: Student | None = None
     bar = tqdm(total=total, initial=done, desc="DAgger episodes", unit="ep", disable=not progress)
     with bar, _pool(n_workers) as pool:
         for rnd in range(cfg.rounds + 1):
-            rdir = _round_dir(out, rnd)
-            prev_ckpt = None if rnd == 0 else str(_round_dir(out, rnd - 1) / FINAL_FILE)
-            todo = [
-                (
-                    cfg.scenario,
-                    str(reward_path),
-                    prev_ckpt,
-                    dagger_seed(cfg.scenario, cfg.seed, rnd, i),
-                    str(_episode_path(out, rnd, i)),
-                    cfg.label_prev,
-                )
-                for i in range(cfg.episodes_in(rnd))
-                if not _episode_path(out, rnd, i).exists()
-            ]
             bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
-            for _ in _run_parallel(todo, pool, n_workers):
+            for _ in _run_parallel(_round_tasks(cfg, out, reward_path, rnd), pool, n_workers):
                 bar.update(1)
             eps = load_round(out, rnd, cfg.episodes_in(rnd))
             obs = np.concatenate([e["obs"] for e in eps]).astype(np.float32)
@@ -397,39 +450,11 @@ def run_dagger(
             agg_obs.append(obs)
             agg_act.append(act)
             x, y = np.concatenate(agg_obs), np.concatenate(agg_act)
-            ckpt = rdir / FINAL_FILE
-            if ckpt.exists():
-                model = load_student(ckpt)
-                history = [float(v) for v in json_info(ckpt).get("loss_history", [])]
-            else:
-                if model is None:
-                    model = build_student(
-                        StudentConfig(
-                            kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta
-                        ),
-                        seed=cfg.seed,
-                    )
-                epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
-                history = (
-                    train_student(
-                        model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
-                    )
-                    if epochs > 0
-                    else []
-                )
-            events = [str(e["event"]) for e in eps]
-            row = {
-                "round": rnd,
-                "driver": "teacher" if rnd == 0 else "student",
-                "episodes": len(eps),
-                "frames_total": int(x.shape[0]),
-                "success_rate": events.count("success") / len(events),
-                "collision_rate": events.count("collision") / len(events),
-                "mean_time_s": float(np.mean([float(e["time_s"]) for e in eps])),
-                "loss_new_data": held_out,
-                "train_loss": history[-1] if history else math.nan,
-            }
-            if not ckpt.exists():
+            ckpt = _round_dir(out, rnd) / FINAL_FILE
+            fitted = ckpt.exists()
+            model, history = _fit_round(model, cfg, rnd, ckpt, (x, y))
+            row = _curve_row(rnd, eps, int(x.shape[0]), held_out, history)
+            if not fitted:
                 info = {
                     "scenario": cfg.scenario,
                     "source": "dagger",
@@ -445,7 +470,6 @@ def run_dagger(
             _write_curves(out, curves)
             if on_round is not None:
                 on_round(row)
-    assert model is not None
     final = out / FINAL_FILE
     with atomic_path(final) as tmp:
         tmp.write_bytes((_round_dir(out, cfg.rounds) / FINAL_FILE).read_bytes())

@@ -306,75 +306,7 @@ class DensityReward:
         arrays = load_npz(
             p, "reward model", "re-fit the model; the file is truncated or not an npz"
         )
-        need = {"mean", "std", "inducing", "leverage", "alpha", "metadata"}
-        if need - set(arrays):
-            raise DataError(
-                expect(f"reward model {p}", f"arrays {sorted(need)}", sorted(arrays), "re-fit")
-            )
-        try:
-            meta = json.loads(str(arrays["metadata"]))
-        except json.JSONDecodeError as exc:
-            raise DataError(expect(f"{p}: metadata", "JSON", "invalid JSON", "re-fit")) from exc
-        if meta.get("format") != FORMAT:
-            raise DataError(
-                expect(f"{p}: format", FORMAT, meta.get("format"), "re-fit with this version")
-            )
-        d = arrays["mean"].shape[0] if arrays["mean"].ndim == 1 else -1
-        n_u = arrays["alpha"].shape[0] if arrays["alpha"].ndim == 1 else -1
-        if d < 1:
-            raise DataError(
-                expect(
-                    f"{p}: mean", "a feature vector (D,), D >= 1", arrays["mean"].shape, "re-fit"
-                )
-            )
-        if n_u < 1:
-            raise DataError(
-                expect(
-                    f"{p}: alpha",
-                    "at least one inducing point",
-                    arrays["alpha"].shape,
-                    "re-fit the model on some demos",
-                )
-            )
-        shapes = {
-            "mean": (d,),
-            "std": (d,),
-            "inducing": (n_u, d),
-            "leverage": (n_u,),
-            "alpha": (n_u,),
-        }
-        for k, shp in shapes.items():
-            arr = arrays[k]
-            if arr.shape != shp:
-                raise DataError(expect(f"{p}: {k}", f"shape {shp}", arr.shape, "re-fit the model"))
-            if not np.all(np.isfinite(arr)):
-                raise DataError(expect(f"{p}: {k}", "finite values", "NaN/inf", "re-fit the model"))
-        if np.any(np.abs(arrays["leverage"]) > 1) or np.any(arrays["std"] <= 0):
-            raise DataError(
-                expect(f"{p}: leverage/std", "γ̃ in [-1, 1], std > 0", "out of range", "re-fit")
-            )
-        missing = sorted(
-            {"config", "feature_names", "length_scale", "scale", "n_train"} - set(meta)
-        )
-        if missing:
-            raise DataError(
-                expect(
-                    f"{p}: metadata",
-                    "config, feature_names, length_scale, scale, n_train",
-                    f"missing {missing}",
-                    "re-fit the model",
-                )
-            )
-        for key in ("length_scale", "scale"):
-            val = meta[key]
-            if not (isinstance(val, int | float) and np.isfinite(val) and val > 0):
-                raise DataError(
-                    expect(f"{p}: {key}", "a finite number > 0", val, "re-fit the model")
-                )
-        if len(meta["feature_names"]) != d:
-            raise DataError(
-                expect(f"{p}: feature_names", f"{d} names", len(meta["feature_names"]), "re-fit")
-            )
+        meta = _checked_meta(p, arrays)
         model = cls(DensityConfig.from_dict(meta["config"]))
         model.feature_names = list(meta["feature_names"])
         model.mean_ = arrays["mean"].astype(np.float64)
@@ -388,6 +320,76 @@ class DensityReward:
         model.info_ = dict(meta.get("info", {}))
         model._w = model.alpha_ * model.config.gain2 * np.cos(0.5 * np.pi * (1.0 - model.leverage_))
         return model
+
+
+def _checked_meta(p: Path, arrays: dict[str, Any]) -> dict[str, Any]:
+    """Validate a saved model's arrays and metadata (:meth:`DensityReward.load`); returns the
+    metadata."""
+    need = {"mean", "std", "inducing", "leverage", "alpha", "metadata"}
+    if need - set(arrays):
+        raise DataError(
+            expect(f"reward model {p}", f"arrays {sorted(need)}", sorted(arrays), "re-fit")
+        )
+    try:
+        meta = json.loads(str(arrays["metadata"]))
+    except json.JSONDecodeError as exc:
+        raise DataError(expect(f"{p}: metadata", "JSON", "invalid JSON", "re-fit")) from exc
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise DataError(expect(f"{p}: format", FORMAT, got, "re-fit with this version"))
+    d = arrays["mean"].shape[0] if arrays["mean"].ndim == 1 else -1
+    _check_arrays(p, arrays, d)
+    _check_meta_fields(p, meta, d)
+    return meta
+
+
+def _check_arrays(p: Path, arrays: dict[str, Any], d: int) -> None:
+    n_u = arrays["alpha"].shape[0] if arrays["alpha"].ndim == 1 else -1
+    if d < 1:
+        raise DataError(
+            expect(f"{p}: mean", "a feature vector (D,), D >= 1", arrays["mean"].shape, "re-fit")
+        )
+    if n_u < 1:
+        raise DataError(
+            expect(
+                f"{p}: alpha",
+                "at least one inducing point",
+                arrays["alpha"].shape,
+                "re-fit the model on some demos",
+            )
+        )
+    shapes = {"mean": (d,), "std": (d,), "inducing": (n_u, d), "leverage": (n_u,), "alpha": (n_u,)}
+    for k, shp in shapes.items():
+        arr = arrays[k]
+        if arr.shape != shp:
+            raise DataError(expect(f"{p}: {k}", f"shape {shp}", arr.shape, "re-fit the model"))
+        if not np.all(np.isfinite(arr)):
+            raise DataError(expect(f"{p}: {k}", "finite values", "NaN/inf", "re-fit the model"))
+    if np.any(np.abs(arrays["leverage"]) > 1) or np.any(arrays["std"] <= 0):
+        raise DataError(
+            expect(f"{p}: leverage/std", "γ̃ in [-1, 1], std > 0", "out of range", "re-fit")
+        )
+
+
+def _check_meta_fields(p: Path, meta: dict[str, Any], d: int) -> None:
+    missing = sorted({"config", "feature_names", "length_scale", "scale", "n_train"} - set(meta))
+    if missing:
+        raise DataError(
+            expect(
+                f"{p}: metadata",
+                "config, feature_names, length_scale, scale, n_train",
+                f"missing {missing}",
+                "re-fit the model",
+            )
+        )
+    for key in ("length_scale", "scale"):
+        val = meta[key]
+        if not (isinstance(val, int | float) and np.isfinite(val) and val > 0):
+            raise DataError(expect(f"{p}: {key}", "a finite number > 0", val, "re-fit the model"))
+    if len(meta["feature_names"]) != d:
+        raise DataError(
+            expect(f"{p}: feature_names", f"{d} names", len(meta["feature_names"]), "re-fit")
+        )
 
 
 def _cholesky_solve(a: F64, b: F64, jitter: float) -> tuple[F64, float]:

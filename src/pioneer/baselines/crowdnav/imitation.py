@@ -353,6 +353,64 @@ def bc_loss(model: CrowdNavNet, data: BCData) -> float:
 
 
 # ------------------------------------------------------------------------------ the phase
+_SETTINGS_FIX = "use a new --out (it holds an imitation phase of other settings)"
+
+
+def _check_settings(where: Path, stored: Any, mine: dict[str, Any]) -> None:
+    """Refuse to resume from ``where`` if its stored settings differ from this run's."""
+    mine = json.loads(json.dumps(mine))
+    if stored != mine:
+        stored = stored if isinstance(stored, dict) else {}
+        diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
+        raise ConfigError(
+            expect(
+                f"{where}: settings",
+                "this command's",
+                {k: stored.get(k) for k in diff},
+                _SETTINGS_FIX,
+            )
+        )
+
+
+def _collect_rounds(
+    scenario: ScenarioConfig,
+    net_cfg: CrowdNavConfig,
+    config: WarmStartConfig,
+    seed: int,
+    keys: tuple[Path, dict[str, Any], dict[str, Any]],
+    log: Callable[[str], None] | None,
+) -> BCData:
+    """Teacher episodes and the DAgger rounds, resumed from (and appended to) the data file."""
+    path, settings, clone = keys
+    data: BCData | None = None
+    if path.is_file():
+        data, meta = load_bc_data(path)
+        _check_settings(path, meta.get("settings"), settings)
+        if meta.get("clone") != json.loads(json.dumps(clone)):
+            data = data.rounds(1)  # the teacher's episodes stay valid, the DAgger rounds not
+    world = scenario.world()
+    teacher = make_expert(config.expert, scenario.name)
+    for r in range(config.dagger_rounds + 1):
+        if data is not None and np.any(data.ep_round == r):
+            continue
+        n = config.bc_episodes if r == 0 else config.dagger_episodes
+        driver = None
+        if r > 0:
+            assert data is not None
+            driver, _ = train_bc(data.rounds(r), net_cfg, config, seed)
+        if log is not None:
+            log(f"imitation: round {r}, {n} episodes ({'teacher' if r == 0 else 'DAgger'})")
+        part = collect_episodes(
+            scenario, world, teacher, episode_seeds(seed, r, n), net_cfg, driver, r
+        )
+        data = part if data is None else BCData.concat([data, part])
+        save_bc_data(data, path, {"settings": settings, "clone": clone})
+        if log is not None:
+            log(f"imitation: {json.dumps(data.summary())}")
+    assert data is not None
+    return data.rounds(config.dagger_rounds + 1)
+
+
 def warm_start(
     scenario: ScenarioConfig,
     net_cfg: CrowdNavConfig,
@@ -366,7 +424,6 @@ def warm_start(
     module docstring). A complete ``bc_policy.safetensors`` of the same settings is reused."""
     if log is None:
         log = functools.partial(print, flush=True)
-
     settings = {
         "scenario": scenario.name,
         "seed": seed,
@@ -383,53 +440,14 @@ def warm_start(
         "min_std": config.min_std,
     }
     train_settings = {**settings, **clone, "dagger_rounds": config.dagger_rounds}
-    fix = "use a new --out (it holds an imitation phase of other settings)"
-
-    def check(where: Path, stored: Any, mine: dict[str, Any]) -> None:
-        mine = json.loads(json.dumps(mine))
-        if stored != mine:
-            stored = stored if isinstance(stored, dict) else {}
-            diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
-            raise ConfigError(
-                expect(
-                    f"{where}: settings", "this command's", {k: stored.get(k) for k in diff}, fix
-                )
-            )
-
     pol = out / POLICY_FILE
     if pol.is_file():
         info = read_crowdnav_meta(pol)["info"]
-        check(pol, info.get("settings"), train_settings)
+        _check_settings(pol, info.get("settings"), train_settings)
         return load_crowdnav(pol), info
-    world = scenario.world()
-    data: BCData | None = None
-    path = out / DATA_FILE
-    if path.is_file():
-        data, meta = load_bc_data(path)
-        check(path, meta.get("settings"), settings)
-        if meta.get("clone") != json.loads(json.dumps(clone)):
-            data = data.rounds(1)  # the teacher's episodes stay valid, the DAgger rounds not
-    teacher = make_expert(config.expert, scenario.name)
     t0 = time.perf_counter()
-    for r in range(config.dagger_rounds + 1):
-        if data is not None and np.any(data.ep_round == r):
-            continue
-        n = config.bc_episodes if r == 0 else config.dagger_episodes
-        driver = None
-        if r > 0:
-            assert data is not None
-            driver, _ = train_bc(data.rounds(r), net_cfg, config, seed)
-        if progress:
-            log(f"imitation: round {r}, {n} episodes ({'teacher' if r == 0 else 'DAgger'})")
-        part = collect_episodes(
-            scenario, world, teacher, episode_seeds(seed, r, n), net_cfg, driver, r
-        )
-        data = part if data is None else BCData.concat([data, part])
-        save_bc_data(data, path, {"settings": settings, "clone": clone})
-        if progress:
-            log(f"imitation: {json.dumps(data.summary())}")
-    assert data is not None
-    data = data.rounds(config.dagger_rounds + 1)
+    keys = (out / DATA_FILE, settings, clone)
+    data = _collect_rounds(scenario, net_cfg, config, seed, keys, log if progress else None)
     model, losses = train_bc(data, net_cfg, config, seed)
     if progress:
         log(f"imitation: cloned, loss {losses[0]:.4f} -> {losses[-1]:.4f}")

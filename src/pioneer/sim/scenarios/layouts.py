@@ -130,6 +130,98 @@ class ElevatorLayout(Config):
                 )
 
 
+def _elevator_walls(lay: ElevatorLayout) -> tuple[Segment, ...]:
+    """Front wall with the door, the lobby's side walls and the cabin (door centre at origin,
+    cabin at y > 0, lobby at y < 0, the lobby's far side open)."""
+    hw_c, hw_d, hw_l = lay.cabin_width / 2, lay.door_width / 2, lay.lobby_width / 2
+    depth, ld = lay.cabin_depth, lay.lobby_depth
+    return (
+        (-hw_l, 0.0, -hw_d, 0.0),  # front wall, left of the door
+        (hw_d, 0.0, hw_l, 0.0),  # front wall, right of the door
+        (-hw_l, -ld, -hw_l, 0.0),  # lobby left wall
+        (hw_l, -ld, hw_l, 0.0),  # lobby right wall
+        (-hw_c, 0.0, -hw_c, depth),  # cabin left wall
+        (hw_c, 0.0, hw_c, depth),  # cabin right wall
+        (-hw_c, depth, hw_c, depth),  # cabin back wall
+    )
+
+
+def _door_waypoints(lay: ElevatorLayout) -> tuple[Point, Point]:
+    # In front of the door centre, and just inside the cabin.
+    return (0.0, -(lay.human_radius + 0.1)), (0.0, lay.human_radius + 0.1)
+
+
+def _boarders(lay: ElevatorLayout, r_r: float, side: float) -> list[HumanSpec]:
+    """Boarders: alternating right/left of the robot; spots stacked front-to-back in the
+    cabin half of the humans' side."""
+    r_h, m = lay.human_radius, lay.margin
+    hw_c, hw_l = lay.cabin_width / 2, lay.lobby_width / 2
+    depth, ld = lay.cabin_depth, lay.lobby_depth
+    sx = lay.robot_start_half_width
+    # Compact rules: lobby start rows may reach a little beyond the open far side.
+    lobby_y = lay.boarder_y or (-ld - 0.4, -(r_h + m + 0.45))
+    x_in, x_out = lay.boarder_x or (sx + r_r + r_h + 2 * m, hw_l - r_h - m)
+    # Spots run from the deep outer corner (first boarder) to beside the door (last), so a
+    # later boarder never has to pass an earlier one: with A = 2 m/s² at contact and a drive of
+    # at most 1.4 m/s², two 0.6 m bodies cannot come closer than ≈ 1.4 m.
+    deep = (hw_c - r_h - m - 0.15, hw_c - r_h - m, depth - r_h - m - 0.3, depth - r_h - m)
+    near = (0.1, 0.35, r_h + 0.15, r_h + 0.35)
+    n_b = lay.n_boarding
+    exiting = tuple(range(n_b, n_b + lay.n_exiting))
+    humans: list[HumanSpec] = []
+    for k in range(n_b):
+        lobby_side = (1.0 if k % 2 == 0 else -1.0) * (
+            -side if lay.first_boarder_on_goal_side else 1
+        )
+        start = Region(
+            x=(x_in, max(x_in, x_out)) if lobby_side > 0 else (-max(x_in, x_out), -x_in),
+            y=lobby_y,
+        )
+        f = k / (n_b - 1) if n_b > 1 else 0.0
+        box = [(1 - f) * d + f * e for d, e in zip(deep, near, strict=True)]
+        spot = Region(x=(box[0], box[1]), y=(box[2], box[3]))
+        wait = (*exiting, *((k - 1,) if k > 0 else ())) if lay.boarders_queue else ()
+        humans.append(
+            HumanSpec(
+                role="boarding",
+                start=start,
+                goal=spot if side > 0 else spot.mirrored(),
+                waypoints=_door_waypoints(lay),
+                radius=r_h,
+                v_pref_choices=lay.v_pref_choices,
+                start_delay=lay.boarding_delay,
+                wait_for=wait,
+                release_waypoint=lay.boarder_release_waypoint,
+                reacts_to_robot=lay.boarders_react_to_robot,
+            )
+        )
+    return humans
+
+
+def _exiting(lay: ElevatorLayout, side: float) -> list[HumanSpec]:
+    """Exiting passengers: from the cabin centre through the door, aside through
+    ``exit_waypoints`` and out through the lobby's open far side."""
+    r_h, m = lay.human_radius, lay.margin
+    depth, ld = lay.cabin_depth, lay.lobby_depth
+    front, behind = _door_waypoints(lay)
+    aside = tuple((side * x, y) for x, y in lay.exit_waypoints or ())  # HR-RL coordinates
+    exit_x = (aside[-1][0], aside[-1][0]) if aside else (-0.3, 0.3)
+    exit_y = lay.exit_start_y or (r_h + 0.3, min(r_h + 0.9, depth - r_h - m))
+    return [
+        HumanSpec(
+            role="exiting",
+            start=Region(x=lay.exit_start_x, y=exit_y),
+            goal=Region(x=exit_x, y=(-ld - 1.5, -ld - 1.5)),
+            waypoints=(behind, front, *aside),
+            radius=r_h,
+            v_pref_choices=lay.v_pref_choices,
+            release_waypoint=lay.exit_release_waypoint,
+            reacts_to_robot=lay.exiting_react_to_robot,
+        )
+        for _ in range(lay.n_exiting)
+    ]
+
+
 def elevator_scenario(
     layout: ElevatorLayout | None = None, sim: SimConfig | None = None, name: str | None = None
 ) -> ScenarioConfig:
@@ -147,14 +239,10 @@ def elevator_scenario(
     """
     lay = layout or ElevatorLayout()
     sim = sim or SimConfig()
-    r_h = lay.human_radius
     r_r = sim.robot.radius
     m = lay.margin
-    hw_c = lay.cabin_width / 2
-    hw_d = lay.door_width / 2
-    hw_l = lay.lobby_width / 2
-    depth = lay.cabin_depth
-    ld = lay.lobby_depth
+    hw_c, hw_l = lay.cabin_width / 2, lay.lobby_width / 2
+    depth, ld = lay.cabin_depth, lay.lobby_depth
     if lay.door_width < 2 * r_r + 2 * m:
         raise ScenarioError(
             expect(
@@ -164,88 +252,20 @@ def elevator_scenario(
                 "widen the door",
             )
         )
-    walls: tuple[Segment, ...] = (
-        (-hw_l, 0.0, -hw_d, 0.0),  # front wall, left of the door
-        (hw_d, 0.0, hw_l, 0.0),  # front wall, right of the door
-        (-hw_l, -ld, -hw_l, 0.0),  # lobby left wall
-        (hw_l, -ld, hw_l, 0.0),  # lobby right wall
-        (-hw_c, 0.0, -hw_c, depth),  # cabin left wall
-        (hw_c, 0.0, hw_c, depth),  # cabin right wall
-        (-hw_c, depth, hw_c, depth),  # cabin back wall
-    )
-    bounds = (-hw_l, hw_l, -ld, depth)
-    front = (0.0, -(r_h + 0.1))  # waypoint in front of the door centre
-    behind = (0.0, r_h + 0.1)  # waypoint just inside the cabin
     side = 1.0 if lay.human_side == "right" else -1.0
     sx = lay.robot_start_half_width
-    # Compact rules: lobby start rows may reach a little beyond the open far side.
-    lobby_y = lay.boarder_y or (-ld - 0.4, -(r_h + m + 0.45))
-    humans: list[HumanSpec] = []
-    # Boarders: alternating right/left of the robot; spots stacked front-to-back in one half.
-    x_in, x_out = lay.boarder_x or (sx + r_r + r_h + 2 * m, hw_l - r_h - m)
-    # Spots run from the deep outer corner (first boarder) to beside the door (last), so a
-    # later boarder never has to pass an earlier one: with A = 2 m/s² at contact and a drive of
-    # at most 1.4 m/s², two 0.6 m bodies cannot come closer than ≈ 1.4 m.
-    deep = (hw_c - r_h - m - 0.15, hw_c - r_h - m, depth - r_h - m - 0.3, depth - r_h - m)
-    near = (0.1, 0.35, r_h + 0.15, r_h + 0.35)
-    n_b = lay.n_boarding
-    exiting = tuple(range(n_b, n_b + lay.n_exiting))
-    for k in range(n_b):
-        lobby_side = (1.0 if k % 2 == 0 else -1.0) * (
-            -side if lay.first_boarder_on_goal_side else 1
-        )
-        start = Region(
-            x=(x_in, max(x_in, x_out)) if lobby_side > 0 else (-max(x_in, x_out), -x_in),
-            y=lobby_y,
-        )
-        f = k / (n_b - 1) if n_b > 1 else 0.0
-        box = [(1 - f) * d + f * e for d, e in zip(deep, near, strict=True)]
-        spot = Region(x=(box[0], box[1]), y=(box[2], box[3]))
-        wait = (*exiting, *((k - 1,) if k > 0 else ())) if lay.boarders_queue else ()
-        spot_s = spot if side > 0 else spot.mirrored()
-        humans.append(
-            HumanSpec(
-                role="boarding",
-                start=start,
-                goal=spot_s,
-                waypoints=(front, behind),
-                radius=r_h,
-                v_pref_choices=lay.v_pref_choices,
-                start_delay=lay.boarding_delay,
-                wait_for=wait,
-                release_waypoint=lay.boarder_release_waypoint,
-                reacts_to_robot=lay.boarders_react_to_robot,
-            )
-        )
-    aside = tuple((side * x, y) for x, y in lay.exit_waypoints or ())  # HR-RL coordinates
-    exit_x = (aside[-1][0], aside[-1][0]) if aside else (-0.3, 0.3)
-    exit_y = lay.exit_start_y or (r_h + 0.3, min(r_h + 0.9, depth - r_h - m))
-    for _ in range(lay.n_exiting):
-        humans.append(
-            HumanSpec(
-                role="exiting",
-                start=Region(x=lay.exit_start_x, y=exit_y),
-                goal=Region(x=exit_x, y=(-ld - 1.5, -ld - 1.5)),
-                waypoints=(behind, front, *aside),
-                radius=r_h,
-                v_pref_choices=lay.v_pref_choices,
-                release_waypoint=lay.exit_release_waypoint,
-                reacts_to_robot=lay.exiting_react_to_robot,
-            )
-        )
     goal = Region(
         x=(-(hw_c - r_r - 0.15), -min(hw_c - r_r - 0.15, 0.45)), y=(1.0, depth - r_r - 0.2)
     )
-    default_name = "hr-rl" if side > 0 else "hl-rr"
     robot_y = lay.robot_start_y or (-ld + 0.25, -(r_r + 0.35))
     return ScenarioConfig(
-        name=name or default_name,
-        walls=walls,
-        bounds=bounds,
+        name=name or ("hr-rl" if side > 0 else "hl-rr"),
+        walls=_elevator_walls(lay),
+        bounds=(-hw_l, hw_l, -ld, depth),
         robot_start=Region(x=(-sx, sx), y=robot_y),
         robot_goal=goal if side > 0 else goal.mirrored(),
         robot_heading=(math.pi / 2 - 0.15, math.pi / 2 + 0.15),
-        humans=tuple(humans),
+        humans=(*_boarders(lay, r_r, side), *_exiting(lay, side)),
         min_start_gap=lay.min_start_gap,
         sim=sim,
     )
