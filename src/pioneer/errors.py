@@ -6,6 +6,8 @@ The CLI turns any :class:`PioneerError` into one line on stderr and exit code 2.
 
 from __future__ import annotations
 
+import errno
+
 
 class PioneerError(Exception):
     """Base class of all errors a user can cause (bad config, bad data, bad command)."""
@@ -30,3 +32,49 @@ class DataError(PioneerError, ValueError):
 def expect(field: str, expected: str, received: object, fix: str) -> str:
     """Format the house error message: ``field: expected X, received Y; fix: Z``."""
     return f"{field}: expected {expected}, received {received!r}; fix: {fix}"
+
+
+# Optional dependencies: import name -> the pip extra that installs it.
+EXTRAS = {
+    "torch": "learn",
+    "safetensors": "learn",
+    "onnx": "learn",
+    "onnxruntime": "deploy",
+    "rosbags": "ros",
+    "pygame": "teleop",
+    "ray": "distributed",
+    "pysocialforce": "bench",
+}
+
+_OS_FIXES = {
+    errno.EACCES: "choose a path you may write to (or read)",
+    errno.EPERM: "choose a path you may write to (or read)",
+    errno.EROFS: "choose a path on a writable file system",
+    errno.ENOSPC: "free disk space and run again (finished results are kept)",
+    errno.EDQUOT: "free disk space and run again (finished results are kept)",
+    errno.EFBIG: "raise the file-size limit (ulimit -f) or free space; finished results are kept",
+    errno.ENOTDIR: "a part of the path is a file, not a folder: choose another path",
+    errno.EISDIR: "the path is a folder: name a file inside it",
+    errno.EEXIST: "the path exists as the other kind (file or folder): choose another path",
+    errno.ENOENT: "check the path",
+    errno.ENAMETOOLONG: "choose a shorter path",
+}
+
+
+def os_error_line(exc: OSError) -> str:
+    """One line for an :class:`OSError` met while reading or writing a file: the path, what
+    happened and the fix (the CLI prints it and exits 2)."""
+    where = exc.filename if exc.filename is not None else "a file"
+    what = exc.strerror or type(exc).__name__
+    name = errno.errorcode.get(exc.errno or 0, "")
+    received = f"{what} ({name})" if name else what
+    fix = _OS_FIXES.get(exc.errno or 0, "check the path and the disk")
+    return f"{where}: expected a path that can be read or written, received {received}; fix: {fix}"
+
+
+def missing_dependency_line(exc: ImportError) -> str:
+    """One line for a missing optional dependency, naming the extra that installs it."""
+    module = (exc.name or str(exc)).split(".")[0]
+    extra = EXTRAS.get(module)
+    fix = f"pip install 'pioneer-nav[{extra}]'" if extra else f"pip install {module}"
+    return expect(f"module {module}", "installed", "not installed", fix)

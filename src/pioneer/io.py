@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 import zipfile
 import zlib
@@ -15,11 +16,87 @@ import numpy as np
 
 from pioneer.errors import DataError, expect
 
-__all__ = ["atomic_path", "load_npz", "write_text_atomic"]
+__all__ = [
+    "atomic_path",
+    "check_regular_target",
+    "load_npz",
+    "naming_path",
+    "output_dir",
+    "output_dir_kind",
+    "write_text_atomic",
+]
 
 # Read once at import (reading the umask means setting it; not thread-safe later on).
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+
+
+_KINDS = (
+    (stat.S_ISDIR, "a folder"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def check_regular_target(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a :class:`Path` if it is a regular file or does not exist yet; anything
+    else (folder, device, FIFO, socket — also behind a symlink) raises :class:`DataError`,
+    so a writer never replaces or blocks on it."""
+    target = Path(path)
+    try:
+        mode = target.stat().st_mode
+    except FileNotFoundError:
+        return target
+    if stat.S_ISREG(mode):
+        return target
+    raise DataError(
+        expect(f"output {target}", "a regular file or a new path", _kind(mode), "name a file path")
+    )
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def output_dir_kind(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a :class:`Path` if it is a folder or does not exist yet; a file, device,
+    FIFO or socket there raises :class:`DataError`."""
+    out = Path(path)
+    with contextlib.suppress(FileNotFoundError):
+        mode = out.stat().st_mode
+        if not stat.S_ISDIR(mode):
+            raise DataError(
+                expect(
+                    f"output folder {out}", "a folder or a new path", _kind(mode), "name a folder"
+                )
+            )
+    return out
+
+
+def output_dir(path: str | os.PathLike[str]) -> Path:
+    """Create the output folder ``path`` (and its parents) if needed and return it; a file,
+    device, FIFO or socket at ``path`` raises :class:`DataError` (:func:`output_dir_kind`), an
+    unwritable place the :class:`OSError` that the CLI reports in one line."""
+    out = output_dir_kind(path)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+@contextlib.contextmanager
+def naming_path(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Re-raise an :class:`OSError` of the body (a full disk, a file-size limit, a temporary
+    file that cannot be created) with ``path`` as its file name, so the one error line names
+    the file the user asked for, not a temporary one or none."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno is None:
+            raise
+        raise OSError(exc.errno, exc.strerror, os.fspath(path)) from exc
 
 
 @contextlib.contextmanager
@@ -27,22 +104,27 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it over ``path``.
 
     If the body raises, the temporary file is removed and ``path`` is left untouched, so a
-    crash or bad input never leaves a half-written file behind.
+    crash or bad input never leaves a half-written file behind. ``path`` must be a regular
+    file or new (:func:`check_regular_target`): a device, FIFO, socket or folder there is
+    refused before anything is written.
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        # mkstemp creates 0600, and writers that recreate the file (safetensors) do too: give
-        # the finished file the usual permissions.
-        os.chmod(tmp_path, 0o666 & ~_UMASK)
-        os.replace(tmp_path, target)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+    target = check_regular_target(path)
+    with naming_path(target):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent
+        )
+        os.close(fd)
+        tmp_path = Path(tmp)
+        try:
+            yield tmp_path
+            # mkstemp creates 0600, and writers that recreate the file (safetensors) do too:
+            # give the finished file the usual permissions.
+            os.chmod(tmp_path, 0o666 & ~_UMASK)
+            os.replace(tmp_path, target)
+        finally:
+            if tmp_path.exists():
+                tmp_path.unlink()
 
 
 def load_npz(path: str | os.PathLike[str], what: str, fix: str) -> dict[str, Any]:

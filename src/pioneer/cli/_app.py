@@ -23,9 +23,9 @@ from typing import Annotated, Any, NoReturn, cast
 
 import tyro
 
-from pioneer.cli._common import Command
+from pioneer.cli._common import Command, check_outputs
 from pioneer.cli._parse import parse, refuse
-from pioneer.errors import PioneerError, expect
+from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
 
 __all__ = ["main"]
 
@@ -191,7 +191,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         command, scenario_files = _parse(args)
         _single_threaded_blas()
         _register_scenario_files(scenario_files)
+        check_outputs(command)
         return int(command.run())
     except PioneerError as exc:
-        print(f"pioneer: error: {exc}", file=sys.stderr)
-        return 2
+        return _refused(str(exc))
+    except OSError as exc:  # reading or writing a file: unwritable, full, wrong kind of path
+        return _refused(os_error_line(exc))
+    except ModuleNotFoundError as exc:  # an optional dependency that is not installed
+        if (exc.name or "").split(".")[0] == "pioneer":
+            raise
+        return _refused(missing_dependency_line(exc))
+
+
+def _refused(line: str) -> int:
+    """The one error path: one line on stderr, exit code 2."""
+    print(f"pioneer: error: {line}", file=sys.stderr)
+    return 2

@@ -4,8 +4,11 @@ types, the teacher's ablation flags and ``--policy NAME[:key=value,…]``."""
 from __future__ import annotations
 
 import dataclasses
+import errno
 import inspect
+import os
 import sys
+import typing
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
@@ -22,7 +25,11 @@ __all__ = [
     "Ablations",
     "Command",
     "Flag",
+    "OutDir",
+    "OutFile",
+    "Output",
     "Workers",
+    "check_outputs",
     "command_line",
     "default",
     "metavar",
@@ -74,6 +81,50 @@ def metavar(name: str) -> Any:
 
 
 Workers = Annotated[int | None, optional("N", "all cores")]
+
+
+@dataclasses.dataclass(frozen=True)
+class Output:
+    """Marks an option as a path the command writes: a ``file`` or a ``folder``. Every such
+    path is checked before the command starts (:func:`check_outputs`)."""
+
+    kind: Literal["file", "folder"]
+
+
+OutFile = Annotated[str, metavar("FILE"), Output("file")]
+OutDir = Annotated[str, metavar("DIR"), Output("folder")]
+
+
+def check_outputs(command: object) -> None:
+    """Refuse, before any work, an output path of the wrong kind (a folder, device, FIFO or
+    socket where a file goes; anything but a folder where a folder goes) or under a file —
+    so an hour's run does not end at a path it cannot write."""
+    from pioneer.io import check_regular_target, output_dir_kind
+
+    hints = typing.get_type_hints(type(command), include_extras=True)
+    for f in dataclasses.fields(command):  # type: ignore[arg-type]
+        marks = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, Output)]
+        value = getattr(command, f.name)
+        if not marks or value is None:
+            continue
+        path = Path(value)
+        _check_ancestor(path)
+        if marks[0].kind == "file":
+            check_regular_target(path)
+        else:
+            output_dir_kind(path)
+
+
+def _check_ancestor(path: Path) -> None:
+    # The nearest existing ancestor must be a folder (else: "Not a directory", as the writer
+    # would find out only at the end).
+    for parent in path.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(path))
+            return
+
+
 Flag = tyro.conf.FlagCreatePairsOff[bool]  # ``--lidar`` sets it; there is no ``--no-lidar``
 
 

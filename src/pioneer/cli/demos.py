@@ -8,7 +8,7 @@ from typing import Annotated
 
 import tyro
 
-from pioneer.cli._common import command_line, default, metavar, optional
+from pioneer.cli._common import OutFile, command_line, default, metavar, optional
 from pioneer.demos.generate import generate
 from pioneer.demos.teleop import TeleopSession
 
@@ -21,7 +21,7 @@ class DemosGenerate:
 
     scenario: str
     """hr-rl, hl-rr or static"""
-    out: Annotated[str, metavar("FILE")]
+    out: OutFile
     """output .npz"""
     positive: Annotated[int | None, optional("N", "the paper's count")] = None
     """positive samples"""
@@ -61,7 +61,7 @@ class DemosShow:
 class Teleop:
     """Drive with the keyboard and record labelled demos (needs pygame-ce)."""
 
-    out: Annotated[str, metavar("FILE")]
+    out: OutFile
     """dataset .npz (appended to after every episode)"""
     scenario: str = "hr-rl"
     """hr-rl, hl-rr, static, …"""

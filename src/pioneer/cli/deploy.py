@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import tyro
 
-from pioneer.cli._common import default, metavar, one_of, optional
+from pioneer.cli._common import OutFile, default, metavar, one_of, optional
 from pioneer.deploy.bag import GOAL_FRAMES, replay_bag
 from pioneer.deploy.mixture import ACTION_MODES
 
@@ -34,7 +34,7 @@ class Replay:
     """ROS 1 .bag file or ROS 2 bag folder"""
     model: Annotated[str, metavar("FILE")]
     """student .onnx (from pioneer export)"""
-    out: Annotated[str, metavar("FILE")]
+    out: OutFile
     """output CSV"""
     goal: Annotated[tuple[float, float], tyro.conf.arg(metavar="X Y")]
     """[m] the goal, in --goal-frame"""
@@ -66,7 +66,7 @@ class Export:
 
     model: Annotated[str, metavar("PATH")]
     """student .safetensors or a distill folder"""
-    out: Annotated[str, metavar("FILE")]
+    out: OutFile
     """output .onnx"""
     action_mode: Annotated[ActionMode | None, optional("{mode,mean}", "the model's")] = None
     """the MDN's executed action"""

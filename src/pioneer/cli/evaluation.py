@@ -10,6 +10,8 @@ from pioneer.cli._common import (
     Ablation,
     Ablations,
     Flag,
+    OutDir,
+    Output,
     Workers,
     default,
     metavar,
@@ -47,9 +49,9 @@ class Run:
     """controller NAME or NAME:key=value,… (e.g. student-mdn:checkpoint=PATH)"""
     seed: int = 0
     """episode seed"""
-    gif: Annotated[str | None, optional("FILE", "none")] = None
+    gif: Annotated[str | None, optional("FILE", "none"), Output("file")] = None
     """write an animation of the episode here"""
-    png: Annotated[str | None, optional("FILE", "none")] = None
+    png: Annotated[str | None, optional("FILE", "none"), Output("file")] = None
     """write a trajectory plot here"""
     lidar: Flag = False
     """draw the LiDAR rays in the GIF"""
@@ -115,7 +117,7 @@ class Eval:
     """Evaluate policies: N seeds × M trials per scenario, in parallel, resumable (records in
     OUT/episodes.jsonl); prints one summary line per row and writes OUT/summary.json."""
 
-    out: Annotated[str, metavar("DIR")]
+    out: OutDir
     """output folder (episodes.jsonl, summary.json)"""
     scenario: Annotated[tuple[str, ...], metavar("NAME")] = SCENARIOS
     """scenario names"""
@@ -194,7 +196,7 @@ class Reproduce:
 
     profile: ProfileName = default(reproduce, "profile")
     """smoke: 1 episode per row (a pipeline check); quick: 2 × 10; paper: 5 × 100"""
-    out: Annotated[str, metavar("DIR")] = default(reproduce, "out_dir")
+    out: OutDir = default(reproduce, "out_dir")
     """output folder"""
     workers: Workers = None
     """processes"""

@@ -13,7 +13,15 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
 from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
-from pioneer.cli._common import Flag, Workers, command_line, default, metavar, one_of, optional
+from pioneer.cli._common import (
+    Flag,
+    OutDir,
+    Workers,
+    command_line,
+    default,
+    one_of,
+    optional,
+)
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
 
@@ -35,7 +43,7 @@ __all__ = ["Distill", "TrainCrowdNav"]
 class Distill:
     """DAgger: distil the teacher into a LiDAR-only student (resumes an existing --out)."""
 
-    out: Annotated[str, metavar("DIR")]
+    out: OutDir
     """output folder (resumes if it exists)"""
     scenario: str = default(DaggerConfig, "scenario")
     """hr-rl, hl-rr, …"""
@@ -92,7 +100,7 @@ class Distill:
 class TrainCrowdNav:
     """CrowdNav++ with PPO, optionally warm-started by imitation (resumes an existing --out)."""
 
-    out: Annotated[str, metavar("DIR")]
+    out: OutDir
     """output folder (checkpoint, policy, curve)"""
     scenario: str = "hr-rl"
     """hr-rl, hl-rr, …"""

@@ -10,7 +10,7 @@ import dataclasses
 import json
 from typing import TYPE_CHECKING, Annotated, Any, TypeAlias
 
-from pioneer.cli._common import Flag, default, metavar, one_of, optional
+from pioneer.cli._common import Flag, OutDir, OutFile, default, metavar, one_of, optional
 from pioneer.data import DEMOS_DIR
 from pioneer.reward.density import INDUCING, DensityConfig
 from pioneer.reward.features import FEATURE_MAPS
@@ -33,7 +33,7 @@ class RewardFit:
 
     demos: Annotated[str, metavar("FILE")]
     """the dataset (.npz)"""
-    out: Annotated[str, metavar("FILE")]
+    out: OutFile
     """output model .npz"""
     features: Annotated[Features | None, optional("{xy,obs_action}", "by scenario")] = None
     """the feature map"""
@@ -143,7 +143,7 @@ class StudyStatic:
     """The synthetic static study (paper Fig. 3): rewards fitted on positives only and on
     positives + negatives, and teacher runs; prints the summary (JSON)."""
 
-    out: Annotated[str, metavar("DIR")]
+    out: OutDir
     """output folder"""
     demos: Annotated[str, metavar("FILE")] = str(DEMOS_DIR / "static.npz")
     """static-study demos"""

@@ -7,9 +7,10 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
-from pioneer.cli._common import Workers, default, metavar, optional, require_some
+from pioneer.cli._common import OutDir, Output, Workers, default, metavar, optional, require_some
 from pioneer.experiments.calibration import calibrate
 from pioneer.experiments.reproduce import SCENARIOS
+from pioneer.io import output_dir
 
 if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
@@ -21,7 +22,7 @@ __all__ = ["Calibrate", "Scenarios"]
 class Scenarios:
     """List the scenarios (built-in and from --scenarios files); optionally draw each."""
 
-    png_dir: Annotated[str | None, optional("DIR", "draw none")] = None
+    png_dir: Annotated[str | None, optional("DIR", "draw none"), Output("folder")] = None
     """write one PNG per scenario (its layout and a start state)"""
     seed: int = 0
     """seed of the drawn start state"""
@@ -52,7 +53,7 @@ class Scenarios:
         from pioneer.sim.scenarios import sample_state
         from pioneer.viz import plot_trajectory
 
-        out.mkdir(parents=True, exist_ok=True)
+        output_dir(out)
         for name, cfg in tqdm(configs.items(), desc="layouts", unit="png", disable=None):
             state = sample_state(cfg, np.random.default_rng(self.seed))
             title = f"{name} · initial state, seed {self.seed}"
@@ -65,7 +66,7 @@ class Calibrate:
     """World statistics beside the paper's evidence, on validation seeds (writes
     OUT/calibration.json)."""
 
-    out: Annotated[str, metavar("DIR")]
+    out: OutDir
     """folder for calibration.json"""
     scenario: Annotated[tuple[str, ...], metavar("NAME")] = SCENARIOS
     """hr-rl hl-rr …"""

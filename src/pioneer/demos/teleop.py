@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from pioneer.demos.generate import NEGATIVE_WINDOW, Frame, negative_frames
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, PioneerError, expect
+from pioneer.io import atomic_path
 from pioneer.reward.dataset import Dataset
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario
@@ -456,4 +457,5 @@ class TeleopSession:
         """Save the window as an image (PNG by extension)."""
         if self._screen is None:
             raise ConfigError(expect("screenshot", "an open window", None, "call before close()"))
-        self._pg.image.save(self._screen, os.fspath(path))
+        with atomic_path(path) as tmp:
+            self._pg.image.save(self._screen, os.fspath(tmp))

@@ -13,6 +13,7 @@ name (an edited scenario file) is refused, so one table never mixes two layouts.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -24,6 +25,7 @@ from typing import Any
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import check_regular_target, naming_path, output_dir
 from pioneer.seeds import evaluation_seed
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
@@ -230,9 +232,19 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
 
 
 def _append(fh: Any, rec: dict[str, Any]) -> None:
-    fh.write(json.dumps(rec) + "\n")
-    fh.flush()
-    os.fsync(fh.fileno())
+    """Append one whole record line; if the disk is full, cut the torn line off again so the
+    file resumes cleanly, and name the file in the error."""
+    line = json.dumps(rec) + "\n"
+    with naming_path(fh.name):
+        pos = fh.tell()
+        try:
+            fh.write(line)
+            fh.flush()
+            os.fsync(fh.fileno())
+        except OSError:
+            with contextlib.suppress(OSError):
+                fh.truncate(pos)
+            raise
 
 
 # ------------------------------------------------------------------------------ driver
@@ -342,7 +354,7 @@ def evaluate(
         check_policy_name(spec.name)
     _check_shipped_parts(scenarios, policies)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     _record_scenarios(out, scenarios)
     path = out / EPISODES_FILE
     records = read_records(path)
@@ -352,7 +364,7 @@ def evaluate(
     stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
     total = len(done) + len(todo)
     with (
-        open(path, "a") as fh,
+        open(check_regular_target(path), "a") as fh,
         tqdm(
             total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
         ) as bar,

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, expect
-from pioneer.io import write_text_atomic
+from pioneer.io import output_dir, write_text_atomic
 from pioneer.seeds import validation_seed
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
@@ -225,6 +225,7 @@ def calibrate(
         (s, validation_seed("calibrate", s, k), driver) for s in names for k in range(episodes)
     ]
     n_workers = workers if workers is not None else min(len(tasks), os.cpu_count() or 1)
+    out = output_dir(out_dir) if out_dir is not None else None  # refuse a bad --out first
     t0 = time.perf_counter()
     rows = sorted(_run(tasks, n_workers, progress), key=lambda r: (r["scenario"], r["seed"]))
     result: dict[str, Any] = {
@@ -242,9 +243,7 @@ def calibrate(
             "definition": pin_scenario(s, None, "calibrate"),
         }
     result["elapsed_s"] = time.perf_counter() - t0
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
         write_text_atomic(out / "calibration.json", json.dumps(result, indent=2))
         write_text_atomic(out / "episodes.jsonl", "".join(json.dumps(r) + "\n" for r in rows))
     return result

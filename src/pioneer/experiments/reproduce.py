@@ -25,7 +25,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
-from pioneer.io import write_text_atomic
+from pioneer.io import output_dir, write_text_atomic
 
 __all__ = ["PROFILES", "Profile", "reproduce"]
 
@@ -78,7 +78,7 @@ def reproduce(
         )
     prof = PROFILES[profile]
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     t0 = time.perf_counter()
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")

@@ -14,6 +14,7 @@ import numpy as np
 
 from pioneer.control.teacher import LookaheadTeacher
 from pioneer.eval.episode import run_episode
+from pioneer.io import output_dir
 from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
 from pioneer.reward.features import feature_map
@@ -29,7 +30,7 @@ def run_static_study(
 ) -> dict[str, Any]:
     """Fit the two rewards, draw the three panels into ``out_dir/static_study.png``."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     fm = feature_map("xy")
     z, g = fm.from_dataset(demos), demos.gamma
     pos = g > 0

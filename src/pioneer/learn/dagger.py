@@ -49,7 +49,7 @@ from tqdm import tqdm
 from pioneer.config import Config
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
-from pioneer.io import atomic_path, load_npz, write_text_atomic
+from pioneer.io import atomic_path, load_npz, output_dir, write_text_atomic
 from pioneer.learn.models import (
     MDN,
     Student,
@@ -334,7 +334,7 @@ def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> Path:
     from pioneer.sim.scenarios import get_scenario
 
     get_scenario(cfg.scenario)  # fail early on an unknown scenario
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     _check_config(out, cfg)
     _check_scenario(out, cfg.scenario)
     reward_path = Path(reward) if reward is not None else out / "reward.npz"

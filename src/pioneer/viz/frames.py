@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw
 
+from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path
 from pioneer.sim.humans import ARRIVED, GONE
 from pioneer.sim.lidar import beam_angles
@@ -100,9 +101,7 @@ def save_gif(
 ) -> None:
     """Write frames ``(H, W, 3)`` as a looping GIF (atomically)."""
     if not frames:
-        raise ValueError(
-            "save_gif: expected at least one frame, received none; fix: record the episode"
-        )
+        raise DataError(expect("save_gif frames", "at least one frame", 0, "record the episode"))
     images = [Image.fromarray(f) for f in frames]
     with atomic_path(path) as tmp:
         images[0].save(

@@ -76,7 +76,7 @@ from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.errors import ConfigError, expect
-from pioneer.io import write_text_atomic
+from pioneer.io import output_dir, write_text_atomic
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
 
@@ -199,7 +199,7 @@ def train_crowdnav(
     if ckpt.is_file():
         tr.load(ckpt)
         resumed_from = tr.update
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     if warm.bc_episodes:
         # Imitation first (reused from out/ when done); the checkpoint then holds its result.
         from pioneer.baselines.crowdnav.imitation import warm_start
