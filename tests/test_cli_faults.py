@@ -199,9 +199,7 @@ def test_full_disk_is_one_line_and_leaves_no_partial_file(name, tmp_path):
             assert p.read_text() == "" or p.read_text().endswith("\n")
 
 
-def test_missing_optional_dependency_is_one_line_naming_the_extra(
-    tmp_path, capsys, monkeypatch
-):
+def test_missing_optional_dependency_is_one_line_naming_the_extra(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "onnx", None)  # as if `pip install onnx` never ran
     code = main(argv("export", tmp_path / "s.onnx"))
     _one_error_line(capsys, code, "module onnx", "pip install 'pioneer-nav[learn]'")

@@ -11,7 +11,9 @@ import pytest
 
 from pioneer.baselines.classic import GoalPolicy
 from pioneer.control import registry
+from pioneer.control.registry import check_policy_kwargs
 from pioneer.errors import ConfigError, DataError
+from pioneer_testutils import assert_house_message
 
 
 def test_every_name_builds_in_a_fresh_interpreter_without_prior_imports() -> None:
@@ -78,3 +80,43 @@ def test_a_plugin_that_cannot_import_is_one_clear_error(monkeypatch: pytest.Monk
         registry.build_policy("broken")
     with pytest.raises(ConfigError, match="one of"):
         registry.build_policy("nope")
+
+
+# ------------------------------------------------------------ typed policy parameters (issue 19)
+@pytest.mark.parametrize(
+    ("name", "kwargs", "needle"),
+    [
+        ("teacher", {"density": "abc"}, "policy teacher.density: expected true or false"),
+        ("dwa", {"horizon": "abc"}, "policy dwa.horizon: expected a number"),
+        ("dwa", {"n_v": 2.5}, "policy dwa.n_v: expected an integer"),
+        ("dwa", {"n_v": True}, "policy dwa.n_v: expected an integer"),
+        ("dwa", {"horizon": -1}, "horizon: expected a finite number > 0"),
+        ("dwa", {"n_v": 1}, "n_v: expected an integer >= 2"),
+        ("dwa", {"horizon": float("nan")}, "policy dwa.horizon: expected a number"),
+        ("goal", {"v_max": 0}, "v_max: expected a finite number > 0"),
+        ("sfm", {"tau": "x"}, "policy sfm.tau: expected a number"),
+        ("teacher", {"bogus": 1}, "expected keys among"),
+    ],
+)
+def test_policy_parameters_are_typed_and_ranged(name, kwargs, needle):
+    with pytest.raises(ConfigError) as err:
+        check_policy_kwargs(name, kwargs)
+    assert_house_message(str(err.value), needle)
+
+
+def test_policy_parameters_come_back_typed():
+    # an integer given for a float parameter becomes a float; None passes where allowed
+    assert check_policy_kwargs("dwa", {"horizon": 3, "n_v": 5}) == {"horizon": 3.0, "n_v": 5}
+    assert isinstance(check_policy_kwargs("dwa", {"horizon": 3})["horizon"], float)
+    assert check_policy_kwargs("sfm", {"tau": None}) == {"tau": None}
+    assert check_policy_kwargs("teacher", {"density": False}) == {"density": False}
+
+
+@pytest.mark.parametrize("spec", ["teacher:density=abc", "dwa:horizon=abc", "dwa:n_v=2.5"])
+def test_bad_policy_parameter_is_one_cli_line(spec, tmp_path, capsys):
+    from pioneer.cli import main
+
+    code = main(["eval", "--policy", spec, "--scenario", "static", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("pioneer: error: policy ")
+    assert not (tmp_path / "o").exists()

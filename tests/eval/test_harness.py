@@ -484,3 +484,16 @@ def test_ray_workers_see_scenario_files(tmp_path, monkeypatch, scenario_registry
         if started:
             ray.shutdown()
     assert len(recs) == 2 and all(r["time_s"] <= 2.0 + 1e-9 for r in recs)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_policy_that_cannot_be_built_fails_before_any_episode(tmp_path, workers):
+    """Every policy of a run is built (in the workers) before the first episode: a corrupt
+    checkpoint is found before any record, and no records file is left behind."""
+    bad = tmp_path / "bad.safetensors"
+    bad.write_text("not a checkpoint")
+    spec = PolicySpec.make("student-mdn", checkpoint=str(bad))
+    with pytest.raises(DataError) as err:
+        evaluate(["static"], [GOAL, spec], 2, 1, tmp_path / "ev", workers=workers, progress=False)
+    assert_house_message(str(err.value), "bad.safetensors")
+    assert not (tmp_path / "ev" / EPISODES_FILE).exists()

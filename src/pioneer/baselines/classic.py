@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from annotated_types import Ge
 from numpy.typing import NDArray
 
+from pioneer.config import NonNegative, Positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
@@ -32,10 +34,10 @@ class GoalPolicy:
 
     def __init__(
         self,
-        v_max: float = 0.8,
-        omega_max: float = 0.4 * math.pi,
-        k_omega: float = 1.5,
-        slow_distance: float = 0.5,
+        v_max: Positive = 0.8,
+        omega_max: Positive = 0.4 * math.pi,
+        k_omega: Positive = 1.5,
+        slow_distance: NonNegative = 0.5,
     ) -> None:
         self.v_max = v_max  # [m/s]
         self.omega_max = omega_max  # [rad/s]
@@ -114,19 +116,19 @@ class DWAPolicy:
 
     def __init__(
         self,
-        accel_v: float = 0.5,
-        accel_omega: float = 1.5,
-        n_v: int = 7,
-        n_omega: int = 15,
-        horizon: float = 2.0,
-        sim_dt: float = 0.1,
-        w_heading: float = 1.0,
-        w_clearance: float = 0.4,
-        w_velocity: float = 1.0,
-        clearance_cap: float = 1.0,
-        safety_margin: float = 0.02,
+        accel_v: Positive = 0.5,
+        accel_omega: Positive = 1.5,
+        n_v: Annotated[int, Ge(2)] = 7,
+        n_omega: Annotated[int, Ge(2)] = 15,
+        horizon: Positive = 2.0,
+        sim_dt: Positive = 0.1,
+        w_heading: NonNegative = 1.0,
+        w_clearance: NonNegative = 0.4,
+        w_velocity: NonNegative = 1.0,
+        clearance_cap: Positive = 1.0,
+        safety_margin: NonNegative = 0.02,
         human_model: str = "static",
-        k_omega: float = 1.5,
+        k_omega: Positive = 1.5,
     ) -> None:
         if human_model not in ("static", "constant_velocity"):
             raise ConfigError(
@@ -270,13 +272,13 @@ class SocialForceRobotPolicy:
 
     def __init__(
         self,
-        v_pref: float = 0.8,
-        tau: float | None = None,
-        a_human: float | None = None,
-        b_human: float | None = None,
-        a_wall: float | None = None,
-        b_wall: float | None = 0.5,
-        k_omega: float = 1.5,
+        v_pref: Positive = 0.8,
+        tau: Positive | None = None,
+        a_human: NonNegative | None = None,
+        b_human: Positive | None = None,
+        a_wall: NonNegative | None = None,
+        b_wall: Positive | None = 0.5,
+        k_omega: Positive = 1.5,
     ) -> None:
         self.v_pref = v_pref  # [m/s]
         self.tau = tau  # [s]

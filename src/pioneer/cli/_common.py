@@ -173,7 +173,7 @@ def policy_spec(text: str) -> PolicySpec:
     check_policy_name(spec.name)
     kwargs = dict(spec.kwargs)
     if kwargs:
-        check_policy_kwargs(spec.name, kwargs)
+        kwargs = check_policy_kwargs(spec.name, kwargs)
         for key in ("checkpoint", "model", "reward", "weights"):
             if isinstance(kwargs.get(key), str) and "{" not in kwargs[key]:
                 kwargs[key] = str(Path(kwargs[key]).resolve())

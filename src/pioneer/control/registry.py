@@ -24,6 +24,7 @@ import inspect
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from pioneer.config import check_parameters
 from pioneer.control.policy import Policy
 from pioneer.errors import ConfigError, expect
 
@@ -57,9 +58,14 @@ class PolicyEntry:
     extra: str = ""  # e.g. "learn" (torch)
     summary: str = ""
 
+    def target(self) -> Callable[..., Policy]:
+        """The factory itself, without the fixed keyword arguments (imports its module); its
+        signature's annotations type the policy's parameters."""
+        return self.entry_point if callable(self.entry_point) else self._load(self.entry_point)
+
     def factory(self) -> Callable[..., Policy]:
         """The factory with this entry's fixed keyword arguments (imports its module)."""
-        fn = self.entry_point if callable(self.entry_point) else self._load(self.entry_point)
+        fn = self.target()
         if not self.kwargs:
             return fn
         fixed = dict(self.kwargs)
@@ -231,23 +237,12 @@ def policy_factory(name: str) -> Callable[..., Policy]:
     return policy_entry(name).factory()
 
 
-def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> None:
-    """Raise :class:`ConfigError` unless the factory of ``name`` takes every key of ``kwargs``
-    (imports the factory: torch for the students)."""
-    params = inspect.signature(policy_factory(name)).parameters
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return
-    allowed = sorted(k for k in params if k != "scenario")
-    unknown = sorted(set(kwargs) - set(allowed))
-    if unknown:
-        raise ConfigError(
-            expect(
-                f"policy {name!r} parameters",
-                f"keys among {allowed}",
-                unknown,
-                "correct the key (see the policy's factory)",
-            )
-        )
+def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """``kwargs`` checked against the parameters the factory of ``name`` declares — their
+    names, types and ``Annotated`` ranges, declared once on the factory's signature — and
+    returned typed (imports the factory: torch for the students). Raises :class:`ConfigError`
+    naming the parameter, what it takes and the fix."""
+    return check_parameters(f"policy {name}", policy_entry(name).target(), dict(kwargs))
 
 
 def check_parts(name: str, scenario: str, kwargs: Mapping[str, Any]) -> None:

@@ -260,18 +260,38 @@ def _tasks(
     ]
 
 
-def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
+def build_check(pair: tuple[str, PolicySpec]) -> str:
+    """Build the policy of ``pair`` = (scenario, spec) in this process (kept in its cache);
+    any error it raises surfaces before the first episode runs."""
+    scenario, spec = pair
+    _make_policy(spec, scenario)
+    return spec.row
+
+
+def _pairs(tasks: list[Task]) -> list[tuple[str, PolicySpec]]:
+    return list(dict.fromkeys((t.scenario, t.policy) for t in tasks))
+
+
+# A stream first yields None once every policy of the run is built (a policy that cannot be
+# built fails the run before any episode, and before the records file is opened), then the
+# records as the episodes finish.
+def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any] | None]:
     if workers <= 1:
+        for pair in _pairs(tasks):
+            build_check(pair)
+        yield None
         for t in tasks:
             yield run_task(t)
         return
     from pioneer.parallel import bounded_map, spawn_pool
 
     with spawn_pool(workers, _worker_init) as pool:
+        list(pool.map(build_check, _pairs(tasks)))
+        yield None
         yield from bounded_map(pool, run_task, tasks, 4 * workers)
 
 
-def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
+def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any] | None]:
     try:
         import ray
     except ImportError as exc:
@@ -293,6 +313,9 @@ def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any]]:
         if files
         else ray.remote(run_task)
     )
+    build = ray.remote(build_check)
+    ray.get([build.remote(pair) for pair in _pairs(tasks)])
+    yield None
     refs = [remote.remote(t) for t in tasks]
     while refs:
         done, refs = ray.wait(refs, num_returns=1)
@@ -363,6 +386,7 @@ def evaluate(
     n_workers = workers or os.cpu_count() or 1
     stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
     total = len(done) + len(todo)
+    next(stream)  # every policy built before the first episode and the records file
     with (
         open(check_regular_target(path), "a") as fh,
         tqdm(
@@ -370,6 +394,7 @@ def evaluate(
         ) as bar,
     ):
         for rec in stream:
+            assert rec is not None
             _append(fh, rec)
             records.append(rec)
             if on_record is not None:

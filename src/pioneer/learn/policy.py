@@ -16,10 +16,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import torch
+from annotated_types import Ge
 from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
@@ -71,7 +72,7 @@ def make_student_policy(
     kind: str | None = None,
     name: str | None = None,
     action_mode: str | None = None,
-    torch_threads: int | None = 1,
+    torch_threads: Annotated[int, Ge(1)] | None = 1,
 ) -> StudentPolicy:
     """Policy factory: load ``checkpoint`` (``{scenario}`` filled in) as a :class:`StudentPolicy`.
 

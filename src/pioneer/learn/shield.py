@@ -19,11 +19,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from annotated_types import Interval
 from numpy.typing import NDArray
 
+from pioneer.config import NonNegative
 from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy
 from pioneer.control.teacher import LookaheadTeacher
@@ -125,11 +127,11 @@ def make_shield_policy(
     checkpoint: str | Path | None = None,
     scenario: str | None = None,
     fallback: str = "teacher",
-    threshold: float | None = None,
-    quantile: float = 0.95,
+    threshold: NonNegative | None = None,
+    quantile: Annotated[float, Interval(gt=0, lt=1)] = 0.95,
     signal: str = "aleatoric",
     mode: str = "handover",
-    slow_factor: float = 0.3,
+    slow_factor: Annotated[float, Interval(ge=0, le=1)] = 0.3,
     reward: str | None = None,
     name: str = "student-shield",
 ) -> ShieldPolicy:

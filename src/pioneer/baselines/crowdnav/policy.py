@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import torch
+from annotated_types import Ge
 from numpy.typing import NDArray
 
 from pioneer.baselines.crowdnav.network import CrowdNavNet, load_crowdnav
@@ -70,7 +71,7 @@ def make_crowdnav_policy(
     weights: str | Path | None = None,
     scenario: str | None = None,
     name: str = "crowdnav++",
-    torch_threads: int | None = 1,
+    torch_threads: Annotated[int, Ge(1)] | None = 1,
 ) -> CrowdNavPolicy:
     """Policy factory: ``weights`` (``{scenario}`` filled in) or the shipped file for ``scenario``.
 
