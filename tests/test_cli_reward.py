@@ -91,7 +91,20 @@ def test_reward_fit_options(demos_file, tmp_path, capsys):
     # positives only, scored on the full dataset
     pos = tmp_path / "pos.npz"
     argv = ["reward", "fit", "--demos", str(demos_file), "--out", str(pos), "--min-gamma", "0"]
-    assert main(argv) == 0
+    assert main(argv) == 2  # one-sided: refused unless allowed
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no negatives (30 positive, 0 negative)" in err[0]
+    assert "--allow-one-sided" in err[0] and not pos.exists()
+    assert main([*argv, "--allow-one-sided"]) == 0
+    assert "warning" in capsys.readouterr().err
+    only = tmp_path / "only-positive.npz"  # scored on a dataset without negatives: null
+    Dataset.load(demos_file).filter(min_gamma=0).save(only)
+    assert main(["reward", "show", "--model", str(pos), "--demos", str(only)]) == 0
+    own = capsys.readouterr().out
+    assert "NaN" not in own, own
+    assert json.loads(own)["auroc_pos_vs_neg"] is None
+    assert json.loads(own)["reward_negative_mean"] is None
+    assert main([*argv, "--allow-one-sided"]) == 0
     assert _json(capsys)["n_train"] == 30
     assert main(["reward", "show", "--model", str(pos), "--demos", str(demos_file)]) == 0
     shown = _json(capsys)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 import stat
 import tempfile
@@ -23,6 +25,7 @@ __all__ = [
     "naming_path",
     "output_dir",
     "output_dir_kind",
+    "to_json",
     "write_text_atomic",
 ]
 
@@ -146,3 +149,24 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` through :func:`atomic_path`."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def _finite(obj: Any) -> Any:
+    """``obj`` with every non-finite float (NaN, ±inf; numpy scalars too) as ``None``."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _finite(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def to_json(obj: Any, **kwargs: Any) -> str:
+    """``json.dumps`` for everything PioneeR writes or prints: strict JSON, so a NaN or an
+    infinity (an undefined mean, an AUROC without negatives) is written as ``null``."""
+    return json.dumps(_finite(obj), allow_nan=False, **kwargs)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from typing import Annotated
 
 import tyro
@@ -11,6 +10,7 @@ import tyro
 from pioneer.cli._common import OutFile, command_line, default, metavar, optional
 from pioneer.demos.generate import generate
 from pioneer.demos.teleop import TeleopSession
+from pioneer.io import to_json
 
 __all__ = ["DemosGenerate", "DemosShow", "Teleop"]
 
@@ -36,7 +36,7 @@ class DemosGenerate:
             self.scenario, self.positive, self.negative, seed=self.seed, command=command_line()
         )
         d.save(self.out)
-        print(json.dumps({"out": self.out, **d.summary()}))
+        print(to_json({"out": self.out, **d.summary()}))
         return 0
 
 
@@ -53,7 +53,7 @@ class DemosShow:
 
         d = Dataset.load(self.demos)
         meta = {k: v for k, v in d.meta.items() if k not in ("feature_names", "units")}
-        print(json.dumps({**d.summary(), "meta": meta}, indent=2))
+        print(to_json({**d.summary(), "meta": meta}, indent=2))
         return 0
 
 
@@ -79,5 +79,5 @@ class Teleop:
             max_episodes=self.max_episodes,
             command=command_line(),
         )
-        print(json.dumps(session.run()))
+        print(to_json(session.run()))
         return 0

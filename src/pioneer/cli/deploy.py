@@ -7,7 +7,6 @@ when it runs).
 from __future__ import annotations
 
 import dataclasses
-import json
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import tyro
@@ -15,6 +14,7 @@ import tyro
 from pioneer.cli._common import OutFile, default, metavar, one_of, optional
 from pioneer.deploy.bag import GOAL_FRAMES, replay_bag
 from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.io import to_json
 
 if TYPE_CHECKING:
     GoalFrame: TypeAlias = str
@@ -56,7 +56,7 @@ class Replay:
             scan_topic=self.scan_topic,
             odom_topic=self.odom_topic,
         )
-        print(json.dumps(summary))
+        print(to_json(summary))
         return 0
 
 
@@ -75,5 +75,5 @@ class Export:
         """Export with the parity check."""
         from pioneer.learn.export import export_checkpoint
 
-        print(json.dumps(export_checkpoint(self.model, self.out, action_mode=self.action_mode)))
+        print(to_json(export_checkpoint(self.model, self.out, action_mode=self.action_mode)))
         return 0

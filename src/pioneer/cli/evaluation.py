@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from typing import TYPE_CHECKING, Annotated, Literal, TypeAlias
 
 from pioneer.cli._common import (
@@ -23,6 +22,7 @@ from pioneer.cli._common import (
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+from pioneer.io import to_json
 
 if TYPE_CHECKING:
     from pioneer.control.policy import Policy
@@ -67,7 +67,7 @@ class Run:
         rec, traj = run_episode(scenario, policy, seed=self.seed, record=bool(self.gif or self.png))
         if traj is not None:
             self._draw(scenario, policy, traj, rec.event)
-        print(json.dumps(rec.to_dict()))
+        print(to_json(rec.to_dict()))
         return 0
 
     def _policy(self, scenario: str) -> Policy:
@@ -203,5 +203,5 @@ class Reproduce:
 
     def run(self) -> int:
         """Reproduce, then print what was written."""
-        print(json.dumps(reproduce(self.profile, self.out, self.workers), indent=2))
+        print(to_json(reproduce(self.profile, self.out, self.workers), indent=2))
         return 0

@@ -8,7 +8,6 @@ Every default is the one of the config the options fill (``DaggerConfig``, ``PPO
 from __future__ import annotations
 
 import dataclasses
-import json
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
@@ -23,6 +22,7 @@ from pioneer.cli._common import (
     optional,
 )
 from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.io import to_json
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
 
 if TYPE_CHECKING:
@@ -160,6 +160,6 @@ class TrainCrowdNav:
             command=command_line(),
             torch_threads=self.threads,
         )
-        print(json.dumps({"out": self.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
-        print(json.dumps({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+        print(to_json({"out": self.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
+        print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
         return 0

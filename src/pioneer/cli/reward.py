@@ -7,11 +7,13 @@ The fit's defaults are ``DensityConfig``'s, read with :func:`~pioneer.cli._commo
 from __future__ import annotations
 
 import dataclasses
-import json
+import sys
 from typing import TYPE_CHECKING, Annotated, Any, TypeAlias
 
 from pioneer.cli._common import Flag, OutDir, OutFile, default, metavar, one_of, optional
 from pioneer.data import DEMOS_DIR
+from pioneer.errors import DataError, expect
+from pioneer.io import to_json
 from pioneer.reward.density import INDUCING, DensityConfig
 from pioneer.reward.features import FEATURE_MAPS
 
@@ -53,6 +55,8 @@ class RewardFit:
     """how the subset is chosen: k-means medoids or farthest-point sampling"""
     min_gamma: Annotated[float | None, optional("G", "keep all")] = None
     """drop samples with γ below this"""
+    allow_one_sided: Flag = False
+    """fit a dataset without positives or without negatives (a warning instead of a refusal)"""
 
     def run(self) -> int:
         """Fit (selecting l if asked) and save."""
@@ -64,6 +68,17 @@ class RewardFit:
         d = Dataset.load(self.demos)
         if self.min_gamma is not None:
             d = d.filter(min_gamma=self.min_gamma)
+        lacking = d.one_sided()
+        if lacking is not None:
+            what = f"{self.demos}: labels"
+            got = f"{lacking} ({d.n_positive} positive, {d.n_negative} negative)"
+            if not self.allow_one_sided or len(d) == 0:
+                fix = "add demonstrations of the other kind, or pass --allow-one-sided"
+                raise DataError(expect(what, "positive and negative samples", got, fix))
+            print(
+                f"pioneer: warning: {what}: {got}; the reward cannot contrast them (Eq. 1)",
+                file=sys.stderr,
+            )
         fm = feature_map(self.features or default_feature_map(d.scenarios))
         z = fm.from_dataset(d)
         cfg = DensityConfig(
@@ -83,7 +98,7 @@ class RewardFit:
             model.info_["length_selection"] = records
         model.save(self.out)
         fitted = {"length_scale": model.length_, "scale": model.scale_, "n_train": model.n_train_}
-        print(json.dumps({"out": self.out, **fitted, **model.info_}))
+        print(to_json({"out": self.out, **fitted, **model.info_}))
         return 0
 
 
@@ -114,7 +129,7 @@ class RewardShow:
         demos = self.demos or m.info_.get("demos")
         if demos:
             out.update(_scores(m, str(demos)))
-        print(json.dumps(out, indent=2))
+        print(to_json(out, indent=2))
         return 0
 
 
@@ -154,5 +169,5 @@ class StudyStatic:
         from pioneer.reward.dataset import Dataset
 
         summary = run_static_study(Dataset.load(self.demos), self.out)
-        print(json.dumps(summary, indent=2))
+        print(to_json(summary, indent=2))
         return 0

@@ -25,7 +25,7 @@ from typing import Any
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import check_regular_target, naming_path, output_dir
+from pioneer.io import check_regular_target, naming_path, output_dir, to_json
 from pioneer.seeds import evaluation_seed
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
@@ -234,7 +234,7 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
 def _append(fh: Any, rec: dict[str, Any]) -> None:
     """Append one whole record line; if the disk is full, cut the torn line off again so the
     file resumes cleanly, and name the file in the error."""
-    line = json.dumps(rec) + "\n"
+    line = to_json(rec) + "\n"
     with naming_path(fh.name):
         pos = fh.tell()
         try:
@@ -346,7 +346,7 @@ def _record_scenarios(out: Path, names: Sequence[str]) -> None:
         ) from exc
     mine = {n: pin_scenario(n, known.get(n), str(out)) for n in names}
     if any(n not in known for n in mine):
-        write_text_atomic(p, json.dumps({**known, **mine}, indent=1) + "\n")
+        write_text_atomic(p, to_json({**known, **mine}, indent=1) + "\n")
 
 
 def evaluate(

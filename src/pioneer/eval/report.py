@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from pioneer.eval.tables import csv_table, markdown_table, table_rows
-from pioneer.io import write_text_atomic
+from pioneer.io import to_json, write_text_atomic
 
 __all__ = ["write_summary"]
 
@@ -38,7 +37,7 @@ def write_summary(
         csv = csv_table(rows, table)
         csv_parts.append(csv if not csv_parts else csv.split("\n", 1)[1])
     md = "\n".join(md_parts)
-    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))
+    write_text_atomic(out / "summary.json", to_json(summary, indent=2))
     write_text_atomic(out / "summary.md", md)
     write_text_atomic(out / "summary.csv", "".join(csv_parts))
     return md

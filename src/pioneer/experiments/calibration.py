@@ -26,7 +26,6 @@ Statistics per scenario (the keys of ``calibration.json``):
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -39,7 +38,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, expect
-from pioneer.io import output_dir, write_text_atomic
+from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.seeds import validation_seed
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
@@ -244,6 +243,6 @@ def calibrate(
         }
     result["elapsed_s"] = time.perf_counter() - t0
     if out is not None:
-        write_text_atomic(out / "calibration.json", json.dumps(result, indent=2))
-        write_text_atomic(out / "episodes.jsonl", "".join(json.dumps(r) + "\n" for r in rows))
+        write_text_atomic(out / "calibration.json", to_json(result, indent=2))
+        write_text_atomic(out / "episodes.jsonl", "".join(to_json(r) + "\n" for r in rows))
     return result

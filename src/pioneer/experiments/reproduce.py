@@ -25,7 +25,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
-from pioneer.io import output_dir, write_text_atomic
+from pioneer.io import output_dir, to_json, write_text_atomic
 
 __all__ = ["PROFILES", "Profile", "reproduce"]
 
@@ -164,7 +164,7 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         return ""
     write_text_atomic(
         out / "uncertainty.json",
-        json.dumps({"threshold_0.8m": results, "paper_risky_share": matched}, indent=2),
+        to_json({"threshold_0.8m": results, "paper_risky_share": matched}, indent=2),
     )
     plot_uncertainty_histogram(
         hist, out / "figures" / "uncertainty_safe_risky.png", "MDN student: safe vs risky frames"
@@ -215,7 +215,7 @@ def _figures(out: Path, reward_tpl: str) -> dict[str, str]:
         save_gif(frames, out / "figures" / f"{sc}-teacher.gif", fps=10)
         figs[f"{sc} trajectory"] = f"figures/{sc}-teacher.png"
         figs[f"{sc} animation"] = f"figures/{sc}-teacher.gif"
-    figs["_study"] = json.dumps({k: v for k, v in study.items() if k != "figure"})
+    figs["_study"] = to_json({k: v for k, v in study.items() if k != "figure"})
     return figs
 
 

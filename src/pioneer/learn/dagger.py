@@ -49,7 +49,7 @@ from tqdm import tqdm
 from pioneer.config import Config
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
-from pioneer.io import atomic_path, load_npz, output_dir, write_text_atomic
+from pioneer.io import atomic_path, load_npz, output_dir, to_json, write_text_atomic
 from pioneer.learn.models import (
     MDN,
     Student,
@@ -285,7 +285,7 @@ def _check_config(out: Path, cfg: DaggerConfig) -> None:
                     "use the same options to resume, or a new --out directory",
                 )
             )
-    write_text_atomic(p, json.dumps(cfg.to_dict(), indent=2) + "\n")
+    write_text_atomic(p, to_json(cfg.to_dict(), indent=2) + "\n")
 
 
 def _check_scenario(out: Path, name: str) -> None:
@@ -296,7 +296,7 @@ def _check_scenario(out: Path, name: str) -> None:
     recorded = json.loads(p.read_text()) if p.exists() else None
     mine = pin_scenario(name, recorded, str(out))
     if recorded is None:
-        write_text_atomic(p, json.dumps(mine, indent=1) + "\n")
+        write_text_atomic(p, to_json(mine, indent=1) + "\n")
 
 
 def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:

@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from pioneer.errors import DataError, expect
-from pioneer.io import atomic_path
+from pioneer.io import atomic_path, to_json
 
 __all__ = ["load_checked", "read_checkpoint", "write_checkpoint"]
 
@@ -35,7 +35,7 @@ def write_checkpoint(
     meta = {
         "format": fmt,
         "config": json.dumps(dict(config)),
-        "info": json.dumps(dict(info or {})),
+        "info": to_json(dict(info or {})),
         "torch": torch.__version__,
         # The kernels torch picked on this CPU: float results, hence trained weights and the
         # rollouts that follow them, match bit for bit only between machines where it agrees.

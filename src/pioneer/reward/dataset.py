@@ -132,6 +132,17 @@ class Dataset:
         """Samples with γ < 0."""
         return int(np.sum(self.gamma < 0))
 
+    def one_sided(self) -> str | None:
+        """``"no positives"`` or ``"no negatives"`` (or ``"no samples"``) when the dataset
+        lacks one side of the density reward's contrast (Eq. 1), else ``None``."""
+        if len(self) == 0:
+            return "no samples"
+        if self.n_positive == 0:
+            return "no positives"
+        if self.n_negative == 0:
+            return "no negatives"
+        return None
+
     def select(self, mask: NDArray[np.bool_]) -> Dataset:
         """The rows where ``mask`` is True (metadata kept)."""
         m = np.asarray(mask, dtype=bool)

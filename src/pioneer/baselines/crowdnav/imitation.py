@@ -76,6 +76,7 @@ from pioneer.baselines.crowdnav.observation import (
 )
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
+from pioneer.io import to_json
 from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
 from pioneer.sim.world import State, World, step
@@ -406,7 +407,7 @@ def _collect_rounds(
         data = part if data is None else BCData.concat([data, part])
         save_bc_data(data, path, {"settings": settings, "clone": clone})
         if log is not None:
-            log(f"imitation: {json.dumps(data.summary())}")
+            log(f"imitation: {to_json(data.summary())}")
     assert data is not None
     return data.rounds(config.dagger_rounds + 1)
 

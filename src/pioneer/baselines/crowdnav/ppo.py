@@ -62,7 +62,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -76,7 +75,7 @@ from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.errors import ConfigError, expect
-from pioneer.io import output_dir, write_text_atomic
+from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
 
@@ -107,7 +106,7 @@ def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool
             title=f"CrowdNav++ · {tr.scenario.name} · "
             + ("imitation + PPO" if tr.warm.bc_episodes else "PPO"),
         )
-        write_text_atomic(out / "train.json", json.dumps(dict(info), indent=2) + "\n")
+        write_text_atomic(out / "train.json", to_json(dict(info), indent=2) + "\n")
 
 
 def _check_resume(resume: bool | None, ckpt: Path, out: Path) -> None:
