@@ -101,3 +101,18 @@ def test_console_script_bad_scenario_exit_code(cmd):
     assert len(lines) == 1
     assert lines[0].startswith("pioneer: error:")
     assert "Traceback" not in proc.stderr
+
+
+def test_run_prints_a_short_record_and_frames_only_on_request(capsys):
+    argv = ["run", "--scenario", "static", "--policy", "goal", "--seed", "0"]
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1
+    record = json.loads(lines[0])
+    assert record["collided_with"] in {None, "human", "wall", "human and wall"}
+    assert main([*argv, "--frames"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    frames = [json.loads(x) for x in lines[:-1]]
+    assert len(frames) == record["steps"] + 1 and json.loads(lines[-1]) == record
+    assert set(frames[0]) == {"t", "x", "y", "theta", "v", "omega", "clearance", "wall_clearance"}
+    assert [f["t"] for f in frames[:3]] == pytest.approx([0.0, 0.1, 0.2])

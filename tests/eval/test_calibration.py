@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from pioneer.cli import main
 from pioneer.eval.harness import episode_seed
 from pioneer.experiments.calibration import BANDS, _humans_alone, _path_distance, calibrate
+from pioneer.io import to_json
 from pioneer.seeds import TRAINING_BASE, VALIDATION_BASE, training_seed, validation_seed
 from pioneer.sim import get_scenario, sample_state
 
@@ -73,7 +74,7 @@ def test_humans_alone_finish_in_the_paper_world():
 def test_calibrate_writes_every_statistic(tmp_path):
     res = calibrate(["hr-rl"], 2, tmp_path, workers=1, progress=False, driver="goal")
     data = json.loads((tmp_path / "calibration.json").read_text())
-    assert data == json.loads(json.dumps(res))
+    assert data == json.loads(to_json(res))  # strict JSON: an undefined mean is null
     st_ = data["scenarios"]["hr-rl"]
     for key in KEYS:
         assert key in st_

@@ -87,8 +87,30 @@ def test_episode_record_fields():
     assert d["steps"] > 0
     assert d["time_s"] == pytest.approx(0.1 * d["steps"])
     assert d["min_clearance_m"] < 0.0  # a collision: negative swept clearance
+    assert d["collided_with"] == "human"  # the static study's goal runs into the crowd
+    assert 0.0 < d["min_wall_clearance_m"] < 5.0
     assert 0.0 < d["time_close_s"] <= d["time_s"]
     json.dumps(d)  # JSON-serialisable
+
+
+def test_a_wall_collision_says_wall():
+    """Facing a wall with no humans around: the record names the wall and its negative gap."""
+    from pioneer.sim.scenarios import get_scenario
+
+    class Straight:  # full speed ahead, never turning
+        name = "straight"
+
+        def reset(self, info, rng):
+            pass
+
+        def act(self, obs, info):
+            return np.array([0.8, 0.0])
+
+    sc = get_scenario("hr-rl").replace(name="wall-test", humans=())
+    sc = sc.replace(robot_heading=(0.0, 0.0))  # facing +x: the lobby's side wall
+    d = run_episode(sc, Straight(), 0)[0].to_dict()
+    assert d["event"] == "collision" and d["collided_with"] == "wall"
+    assert d["min_wall_clearance_m"] < 0.0 and d["min_clearance_m"] is None
 
 
 # --------------------------------------------------------------------------------------------

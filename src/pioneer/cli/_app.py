@@ -11,6 +11,7 @@ options, as ``pioneer eval …`` (its ``--help`` lists its defaults).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import difflib
 import importlib
@@ -195,6 +196,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(command.run())
     except PioneerError as exc:
         return _refused(str(exc))
+    except BrokenPipeError:  # `pioneer run --frames | head`: the reader left; stop quietly
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + 13  # as if killed by SIGPIPE, the shell's convention
     except OSError as exc:  # reading or writing a file: unwritable, full, wrong kind of path
         return _refused(os_error_line(exc))
     except ModuleNotFoundError as exc:  # an optional dependency that is not installed

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from pioneer.eval.episode import Trajectory
     from pioneer.eval.harness import PolicySpec
     from pioneer.sim.scenarios import ScenarioConfig
+    from pioneer.sim.world import State
 
     ProfileName: TypeAlias = str
 else:
@@ -39,9 +40,27 @@ __all__ = ["Eval", "Reproduce", "Run"]
 _PAPER = PROFILES["paper"]  # the paper's protocol: eval's default seeds × trials
 
 
+def _frame(s: State) -> dict[str, float]:
+    """One frame of ``pioneer run --frames``: time [s], pose [m, m, rad], the last applied
+    command [m/s, rad/s] and the swept human and wall clearances of the last step [m]."""
+    x, y, theta = (float(v) for v in s.robot[0])
+    v, omega = (float(c) for c in s.command[0])
+    return {
+        "t": float(s.t[0]),
+        "x": x,
+        "y": y,
+        "theta": theta,
+        "v": v,
+        "omega": omega,
+        "clearance": float(s.clearance[0]),
+        "wall_clearance": float(s.wall_clearance[0]),
+    }
+
+
 @dataclasses.dataclass(frozen=True)
 class Run:
-    """Run one episode of a policy and print its record (JSON); optionally draw it."""
+    """Run one episode of a policy and print its record (one JSON line, without per-frame
+    series); optionally every frame too, and a drawing."""
 
     scenario: str = "hr-rl"
     """hr-rl, hl-rr, static, hr-rl-r03, …"""
@@ -55,6 +74,9 @@ class Run:
     """write a trajectory plot here"""
     lidar: Flag = False
     """draw the LiDAR rays in the GIF"""
+    frames: Flag = False
+    """print a JSON line of every frame (time, pose, command, clearances) before the record,
+    and keep a student's per-frame uncertainty in the record"""
     ablation: Ablations = dataclasses.field(default_factory=Ablation)
 
     def run(self) -> int:
@@ -64,10 +86,17 @@ class Run:
 
         scenario = get_scenario(self.scenario)
         policy = self._policy(scenario.name)
-        rec, traj = run_episode(scenario, policy, seed=self.seed, record=bool(self.gif or self.png))
-        if traj is not None:
+        record = bool(self.gif or self.png or self.frames)
+        rec, traj = run_episode(scenario, policy, seed=self.seed, record=record)
+        if traj is not None and (self.gif or self.png):
             self._draw(scenario, policy, traj, rec.event)
-        print(to_json(rec.to_dict()))
+        if traj is not None and self.frames:
+            for s in traj.states:
+                print(to_json(_frame(s)))
+        summary = rec.to_dict()
+        if not self.frames:
+            summary.pop("frames", None)
+        print(to_json(summary))
         return 0
 
     def _policy(self, scenario: str) -> Policy:

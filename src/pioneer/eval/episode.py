@@ -48,6 +48,9 @@ class EpisodeRecord:
     min_clearance_m: float  # minimum over the episode (inf if no humans)
     time_close_s: float  # time with clearance below 0.8 m
     steps: int
+    # What the robot hit in a collision: "human", "wall" or "human and wall" (None otherwise).
+    collided_with: str | None = None
+    min_wall_clearance_m: float = math.inf  # minimum robot–wall gap over the episode [m]
     # Per-frame series of policies that report uncertainty (students): "clearance" [m] at
     # decision time, "aleatoric" and "epistemic" [(m/s)² + (rad/s)²], and for a shield
     # "shielded" (0/1). None for other policies.
@@ -57,8 +60,9 @@ class EpisodeRecord:
         """Plain dict; an infinite clearance becomes ``None``; no ``frames`` key without
         frames; frame values rounded to 6 significant digits (a compact JSON line)."""
         d = dataclasses.asdict(self)
-        if not math.isfinite(d["min_clearance_m"]):
-            d["min_clearance_m"] = None
+        for key in ("min_clearance_m", "min_wall_clearance_m"):
+            if not math.isfinite(d[key]):
+                d[key] = None
         if self.frames is None:
             del d["frames"]
         else:
@@ -87,6 +91,12 @@ def _frame_series(policy: Policy, clearance: list[float]) -> dict[str, list[floa
     return out
 
 
+def _hit(info: dict[str, Any]) -> str:
+    """What a collision step touched: the swept human and wall clearances of that step."""
+    human, wall = info["min_clearance"] < 0.0, info["wall_clearance"] < 0.0
+    return "human and wall" if human and wall else "wall" if wall else "human"
+
+
 def run_episode(
     scenario: str | ScenarioConfig,
     policy: Policy,
@@ -104,10 +114,12 @@ def run_episode(
     steps = 0
     event = None
     decision_clearance: list[float] = []  # clearance of the state each command was chosen in
+    wall_min = math.inf
     while event is None:
         decision_clearance.append(float(info["min_clearance"]))
         obs, _, _, _, info = env.step(policy.act(obs, info))
         steps += 1
+        wall_min = min(wall_min, float(info["wall_clearance"]))
         if info["min_clearance"] < close_threshold:
             close += dt
         if record:
@@ -123,6 +135,8 @@ def run_episode(
         min_clearance_m=info["episode_min_clearance"],
         time_close_s=close,
         steps=steps,
+        collided_with=_hit(info) if event == "collision" else None,
+        min_wall_clearance_m=wall_min,
         frames=_frame_series(policy, decision_clearance),
     )
     return rec, (Trajectory(env.world, states) if record else None)
