@@ -7,13 +7,14 @@ The light robot install (``runtime/``, numpy and onnxruntime only) has no Gymnas
 environments to register, so there the import registers nothing.
 """
 
-import importlib.util
-
 __version__ = "0.1.0"
 
-if importlib.util.find_spec("gymnasium") is not None:  # absent only in the light runtime
+try:
     from pioneer.registration import register_envs
-
+except ModuleNotFoundError as exc:  # only the light runtime install lacks Gymnasium
+    if exc.name != "gymnasium":
+        raise
+else:
     register_envs()
 
 __all__ = ["__version__"]
