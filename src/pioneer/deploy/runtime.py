@@ -17,8 +17,9 @@ it cannot trust: it returns v = ω = 0 with ``stop_reason`` set to the first of
 - ``"invalid"``: no beam returned a range (all NaN, all ``+inf``, all zero or below
   ``range_min``): a dead or blinded sensor, not an empty room;
 - ``"sparse"``: fewer than ``min_valid_share`` (default 50 %) of the beams are valid;
-- ``"stale"``: the scan's age is unknown-but-given as NaN, above ``max_age_s`` (default
-  0.5 s), or below −``max_age_s`` (a stamp from the future: the clocks disagree);
+- ``"stale"``: the scan's age is NaN, above ``max_age_s`` (default 0.5 s), or below
+  −``max_age_s`` (a stamp from the future: the clocks disagree); without ``age_s`` the age
+  is not checked;
 - ``"action"``: the student's output was not finite.
 
 A direction the scanner does not see (the rear of a 270° scanner, or beams without a valid
