@@ -65,7 +65,7 @@ def bench_student_decision(plan: Plan) -> Result:
         # The students round-robin with each other; the teacher apart (its 1,200 rollout
         # states flush the caches, which would time a cold student, not a 10 Hz loop's).
         cases = {
-            "onnx_scan": Case(lambda _: runtime.step(ranges, amin, inc, rmax, goal)),
+            "onnx_scan": Case(lambda _: runtime.step(ranges, amin, inc, rmax, goal, age_s=0.05)),
             "torch_obs": Case(lambda _: policy.act(obs, {})),
         }
         secs = time_cases(cases, 10 * plan.batch_repeats, warmup=20)

@@ -52,7 +52,7 @@ rt = StudentRuntime({onnx!r})
 rng = np.random.default_rng({seed})
 for _ in range({n}):
     ranges = rng.uniform(0.4, 6.0, size=360)
-    rt.step(ranges, -math.pi, 2 * math.pi / 360, 10.0, np.array([2.0, 0.5]))
+    rt.step(ranges, -math.pi, 2 * math.pi / 360, 10.0, np.array([2.0, 0.5]), age_s=0.05)
 print(json.dumps({{"rss_peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                   "torch": "torch" in sys.modules and sys.modules["torch"] is not None,
                   "numba": "numba" in sys.modules}}))

@@ -175,13 +175,14 @@ def regenerate_reference(path: Any, data: dict[str, np.ndarray], argv: Sequence[
 
 
 # ---------------------------------------------------------------------- import hygiene
-# The prelude of a child script that must run without torch, numba or the simulator: importing
-# any of them raises ImportError (checked first), and ``heavy()`` lists the heavy modules
-# that got loaded anyway.
+# The prelude of a child script that must run without torch, numba, scipy, matplotlib or the
+# simulator: importing any of them raises ImportError (checked first), and ``heavy()`` lists
+# the heavy modules that got loaded anyway. (tests/deploy/test_light_install.py blocks every
+# package the light robot install lacks.)
 ROBOT_SIDE_PRELUDE = """
 import importlib.abc, json, sys
 
-BLOCKED = ("torch", "numba", "llvmlite", "pioneer.sim")
+BLOCKED = ("torch", "numba", "llvmlite", "scipy", "matplotlib", "pioneer.sim")
 
 class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
@@ -198,6 +199,7 @@ for name in BLOCKED:
         pass
 
 def heavy():
-    names = ("torch", "numba", "pioneer.sim", "pioneer.learn", "pioneer.control")
+    names = ("torch", "numba", "scipy", "matplotlib", "pioneer.sim", "pioneer.learn",
+             "pioneer.control")
     return sorted(m for m in names if m in sys.modules)
 """

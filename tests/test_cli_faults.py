@@ -51,6 +51,7 @@ COMMANDS: dict[str, tuple[str, str, bool]] = {
     "distill": ("distill --scenario static --out OUT", "folder", False),
     "train crowdnav++": ("train crowdnav++ --out OUT", "folder", False),
     "study static": ("study static --out OUT", "folder", False),
+    "study blind-sector": ("study blind-sector --out OUT", "folder", False),
 }
 
 

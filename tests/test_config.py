@@ -10,14 +10,8 @@ from typing import Annotated
 import pytest
 from annotated_types import Ge, Gt, Interval, Le, Lt, MinLen, MultipleOf
 
-from pioneer.config import (
-    Config,
-    NonNegative,
-    Positive,
-    check_nonnegative,
-    check_positive,
-    check_range,
-)
+from pioneer.bounds import NonNegative, Positive
+from pioneer.config import Config, check_nonnegative, check_positive, check_range
 from pioneer.errors import (
     CommandError,
     ConfigError,

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pioneer import laser
-from pioneer.laser import LidarConfig, resample_scan, wrap_angles
+from pioneer.laser import DEFAULT_UNSEEN, UNSEEN_RULES, LidarConfig, resample_scan, wrap_angles
 from pioneer.sim.lidar import observation_from_ranges
 from pioneer.sim.robot import wrap_angle
 
@@ -52,18 +52,20 @@ def test_wrap_angles_equals_scalar_kernel(a):
     assert -math.pi < float(wrap_angles(a)) <= math.pi
 
 
-def oracle_resample(r, amin, inc, range_max, cfg, range_min=0.0):
+def oracle_resample(r, amin, inc, range_max, cfg, range_min=0.0, unseen="obstacle"):
     """Each target beam reads the nearest valid source beam within the tolerance, by brute
     force over every source beam. Exact ties go to the source in the first search window
     (around the target's position u + k·period, k = 0, −1, 1, 2, …) that holds it, then to
-    the lower index."""
+    the lower index. A target beam without one reads 0 (``obstacle``), ``max_range``, or
+    (``nearest``) the shorter range of the circularly nearest target beams that have one."""
     r = np.asarray(r, dtype=float)
     if inc < 0:
         r = r[::-1]
         amin, inc = amin + inc * (r.size - 1), -inc
     tol = max(math.pi / cfg.n_beams, 0.5 * inc) + 1e-9
     w = math.ceil(tol / inc) + 1
-    out = np.full(cfg.n_beams, cfg.max_range)
+    out = np.full(cfg.n_beams, cfg.max_range if unseen == "max_range" else 0.0)
+    seen = np.zeros(cfg.n_beams, dtype=bool)
     for t in range(cfg.n_beams):
         a = 2.0 * math.pi * t / cfg.n_beams
         u = ((a - amin) % (2.0 * math.pi)) / inc
@@ -80,7 +82,16 @@ def oracle_resample(r, amin, inc, range_max, cfg, range_min=0.0):
             key = (d, window, s)
             if d <= tol and key < best:
                 best = key
+                seen[t] = True
                 out[t] = cfg.max_range if no_return else min(x, cfg.max_range)
+    if unseen == "nearest" and seen.any():
+        g = cfg.n_beams
+        filled = out.copy()
+        for t in np.flatnonzero(~seen):
+            dist = {s: min(abs(t - s), g - abs(t - s)) for s in np.flatnonzero(seen)}
+            closest = min(dist.values())
+            filled[t] = min(out[s] for s, dd in dist.items() if dd == closest)
+        out = filled
     return out
 
 
@@ -103,13 +114,19 @@ def scans(draw):
 
 
 @settings(max_examples=100, deadline=None)
-@given(scans())
-def test_resample_matches_brute_force(scan):
+@given(scans(), st.sampled_from(UNSEEN_RULES))
+def test_resample_matches_brute_force(scan, unseen):
     r, amin, inc, rmax, rmin = scan
     cfg = LidarConfig()
     np.testing.assert_array_equal(
-        resample_scan(r, amin, inc, rmax, cfg, rmin), oracle_resample(r, amin, inc, rmax, cfg, rmin)
+        resample_scan(r, amin, inc, rmax, cfg, rmin, unseen),
+        oracle_resample(r, amin, inc, rmax, cfg, rmin, unseen),
     )
+    if unseen == DEFAULT_UNSEEN:
+        np.testing.assert_array_equal(
+            resample_scan(r, amin, inc, rmax, cfg, rmin),
+            oracle_resample(r, amin, inc, rmax, cfg, rmin),
+        )
 
 
 def test_resample_scan_of_more_than_one_turn_sees_the_second_pass():

@@ -3,12 +3,18 @@
 Importing the package registers the Gymnasium environments ``pioneer/ElevatorHRRL-v0``,
 ``pioneer/ElevatorHLRR-v0`` and ``pioneer/StaticStudy-v0`` (by entry-point string). It imports
 neither the simulator (numba) nor matplotlib nor torch; subpackages load what they need.
+The light robot install (``runtime/``, numpy and onnxruntime only) has no Gymnasium and no
+environments to register, so there the import registers nothing.
 """
-
-from pioneer.registration import register_envs
 
 __version__ = "0.1.0"
 
-register_envs()
+try:
+    from pioneer.registration import register_envs
+except ModuleNotFoundError as exc:  # only the light runtime install lacks Gymnasium
+    if exc.name != "gymnasium":
+        raise
+else:
+    register_envs()
 
-__all__ = ["__version__", "register_envs"]
+__all__ = ["__version__"]

@@ -2,12 +2,17 @@
 and range checks are declared on the fields.
 
 A field may carry `annotated-types <https://github.com/annotated-types/annotated-types>`_
-bounds, e.g. ``radius: Annotated[float, Gt(0)] = 0.3`` (or the aliases :data:`Positive`,
-:data:`NonNegative`); :class:`Config` enforces them once, before any ``__post_init__`` of the
-subclass runs, with the message of :func:`check_positive` / :func:`check_nonnegative`.
-Supported: ``Gt``, ``Ge``, ``Lt``, ``Le`` and ``Interval`` on ``int`` and ``float`` fields,
-also inside ``| None`` (``None`` then passes). A bounded ``float`` must be finite; a bounded
-``int`` must be an integer (not a bool). Cross-field checks stay code in ``__post_init__``.
+bounds, e.g. ``radius: Annotated[float, Gt(0)] = 0.3`` (or the aliases
+:data:`pioneer.bounds.Positive`, :data:`pioneer.bounds.NonNegative`); :class:`Config`
+enforces them once, before any ``__post_init__`` of the subclass runs, with the message of
+:func:`check_positive` / :func:`check_nonnegative`. Supported: ``Gt``, ``Ge``, ``Lt``, ``Le``
+and ``Interval`` on ``int`` and ``float`` fields, also inside ``| None`` (``None`` then
+passes). A bounded ``float`` must be finite; a bounded ``int`` must be an integer (not a
+bool). Cross-field checks stay code in ``__post_init__``.
+
+annotated-types is imported only when a field carries ``Annotated`` metadata, so a config
+without declared bounds (the LiDAR's, the robot runtime's) needs no annotated-types: the
+light robot install (``runtime/``) has numpy and onnxruntime only.
 """
 
 from __future__ import annotations
@@ -23,22 +28,15 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any, Self
 
-import annotated_types as at
-
 from pioneer.errors import ConfigError, expect
 
 __all__ = [
     "Config",
-    "NonNegative",
-    "Positive",
     "check_nonnegative",
     "check_parameters",
     "check_positive",
     "check_range",
 ]
-
-Positive = Annotated[float, at.Gt(0)]  # a finite number > 0
-NonNegative = Annotated[float, at.Ge(0)]  # a finite number >= 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,9 +102,11 @@ def check_range(owner: str, name: str, lo: float, hi: float) -> None:
         )
 
 
-def _constraints(metadata: tuple[Any, ...]) -> Iterator[at.BaseMetadata]:
+def _constraints(metadata: tuple[Any, ...]) -> Iterator[Any]:
     """The annotated-types constraints among ``Annotated`` metadata (``Interval`` unpacked);
     other metadata (e.g. CLI markers) is not ours and is skipped."""
+    import annotated_types as at
+
     for m in metadata:
         if isinstance(m, at.GroupedMetadata):
             yield from _constraints(tuple(m))
@@ -123,13 +123,17 @@ def _without_none(hint: Any) -> tuple[Any, bool]:
     return hint, False
 
 
-# constraint type → (which bound, its attribute, strict)
-_BOUND_KINDS: dict[type, tuple[str, str, bool]] = {
-    at.Gt: ("lower", "gt", True),
-    at.Ge: ("lower", "ge", False),
-    at.Lt: ("upper", "lt", True),
-    at.Le: ("upper", "le", False),
-}
+@functools.cache
+def _bound_kinds() -> dict[type, tuple[str, str, bool]]:
+    """constraint type → (which bound, its attribute, strict)."""
+    import annotated_types as at
+
+    return {
+        at.Gt: ("lower", "gt", True),
+        at.Ge: ("lower", "ge", False),
+        at.Lt: ("upper", "lt", True),
+        at.Le: ("upper", "le", False),
+    }
 
 
 def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | None:
@@ -146,11 +150,11 @@ def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | None:
         raise TypeError(f"{owner}.{name}: bounds need an int or float field, not {base!r}")
     kw: dict[str, Any] = {}
     for c in found:
-        if type(c) not in _BOUND_KINDS:
+        if type(c) not in _bound_kinds():
             raise TypeError(
                 f"{owner}.{name}: unsupported constraint {c!r} (use Gt, Ge, Lt, Le, Interval)"
             )
-        key, attr, strict = _BOUND_KINDS[type(c)]
+        key, attr, strict = _bound_kinds()[type(c)]
         if key in kw:
             raise TypeError(f"{owner}.{name}: more than one {key} bound")
         kw[key], kw[f"{key}_strict"] = float(getattr(c, attr)), strict

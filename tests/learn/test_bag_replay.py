@@ -55,6 +55,9 @@ def stamp(k: int) -> tuple[int, int]:
     return T0 + k // 10, (k % 10) * 100_000_000 + 7
 
 
+RECEIVE_DELAY = 0.02  # [s] bag time − header stamp
+
+
 def bag_ns(k: int) -> int:
     """Receive (bag) time of scan k: 20 ms after its stamp."""
     sec, nsec = stamp(k)
@@ -167,12 +170,19 @@ def direct(rt: StudentRuntime, scans: list[np.ndarray], goals: list[tuple[float,
     the resampling's nearest-beam choice can depend on their rounding)."""
     f32 = np.float32
     amin, inc = f32(-math.pi), f32(2 * math.pi / N_BEAMS)
-    return np.array(
-        [
-            list(rt.step(r, amin, inc, f32(10.0), g, range_min=f32(0.1)))
-            for r, g in zip(scans, goals, strict=True)
-        ]
-    )
+    rows = []
+    for k, (r, g) in enumerate(zip(scans, goals, strict=True)):
+        d = rt.step(r, amin, inc, f32(10.0), g, range_min=f32(0.1), age_s=RECEIVE_DELAY)
+        assert d.stop_reason is None, k
+        rows.append([d.v, d.omega, d.aleatoric, d.epistemic, d.valid_share, d.coverage_rad])
+    return np.array(rows)
+
+
+def numbers(rows: list[list[str]]) -> np.ndarray:
+    """The CSV's decision and health columns as numbers (``stop_reason`` and ``age_s`` apart;
+    the age is checked exactly where the stamps are known)."""
+    at = [CSV_COLUMNS.index(c) for c in (*CSV_COLUMNS[2:6], "valid_share", "coverage_rad")]
+    return np.array([[float(r[i]) for i in at] for r in rows])
 
 
 # ------------------------------------------------------------------------------ replay
@@ -190,10 +200,14 @@ def test_replay_matches_the_runtime_scan_by_scan(student, scans, tmp_path, fmt):
     assert [r[0] for r in rows] == [f"{s}.{n:09d}" for s, n in map(stamp, range(N_SCANS))]
     want_bag = [f"{t // 10**9}.{t % 10**9:09d}" for t in map(bag_ns, range(N_SCANS))]
     assert [r[1] for r in rows] == want_bag
-    got = np.array([[float(x) for x in r[2:]] for r in rows])
+    got = numbers(rows)
     assert np.isfinite(got).all() and (got[:, 2:] >= 0).all()
     want = direct(StudentRuntime(onnx), scans, [GOAL] * N_SCANS)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+    assert {r[CSV_COLUMNS.index("stop_reason")] for r in rows} == {""}
+    ages = [float(r[CSV_COLUMNS.index("age_s")]) for r in rows]
+    np.testing.assert_allclose(ages, RECEIVE_DELAY, rtol=1e-9)
+    assert summary["stops"] == {}
     assert sorted(p.name for p in out.parent.iterdir()) == ["commands.csv"]  # no temp file left
 
 
@@ -214,7 +228,7 @@ def test_goal_in_the_odometry_frame(student, scans, tmp_path):
     assert summary["odom_topic"] == "/odom"
     assert (summary["scans"], summary["rows"], summary["skipped"]) == (N_SCANS, N_SCANS - 3, 3)
     _, rows = read_csv(out)
-    got = np.array([[float(x) for x in r[2:]] for r in rows])
+    got = numbers(rows)
     goals = [goal_in_robot_frame(goal_odom, *p) for p in poses]
     np.testing.assert_allclose(got, direct(StudentRuntime(onnx), scans[3:], goals), rtol=1e-6)
     # The fixed robot-frame goal would have decided differently.

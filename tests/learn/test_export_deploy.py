@@ -22,6 +22,7 @@ from pioneer.learn import MDN, MLPStudent, StudentConfig, export_onnx, train_stu
 from pioneer.learn.export import MDN_OUTPUTS
 from pioneer.reward.dataset import Dataset
 from pioneer.sim.lidar import observation_from_scan
+from pioneer.sim.robot import RobotConfig
 from pioneer.sim.world import scan
 from pioneer_testutils import ROBOT_SIDE_PRELUDE, assert_house_message
 
@@ -59,6 +60,12 @@ def torch_outputs(model: MDN | MLPStudent, obs: np.ndarray) -> list[np.ndarray]:
         logits, mu, sigma = model(x)
         ale, epi = model.uncertainty(x)
         return [t.numpy() for t in (model.deterministic_action(x), ale, epi, logits, mu, sigma)]
+
+
+def clip(action: np.ndarray) -> np.ndarray:
+    """``(v, ω)`` clipped to the simulated robot's limits, as the runtime clips."""
+    rc = RobotConfig()
+    return np.clip(action, [rc.v_min, -rc.omega_max], [rc.v_max, rc.omega_max])
 
 
 def inputs(kind: str, demo_obs: np.ndarray) -> np.ndarray:
@@ -160,15 +167,16 @@ def test_scan_to_command_round_trip(students):
         msg[msg >= 5.0] = np.inf
         inc = 2 * math.pi / 72
         np.testing.assert_allclose(observation_from_scan(msg, -math.pi, inc, 5.0, goal), obs)
-        v, w, ale, epi = rt.step(msg, -math.pi, inc, 5.0, goal)
+        d = rt.step(msg, -math.pi, inc, 5.0, goal, age_s=0.0)
+        assert d.stop_reason is None and d.valid_share == 1.0
         u = pol.act(obs, info)
-        np.testing.assert_allclose([v, w], u, **TOL)
+        np.testing.assert_allclose([d.v, d.omega], u, **TOL)
         want = torch_outputs(model, obs[None])
-        np.testing.assert_allclose([v, w], want[0][0], **TOL)
-        np.testing.assert_allclose([ale, epi], [want[1][0], want[2][0]], **TOL)
+        np.testing.assert_allclose([d.v, d.omega], clip(want[0][0]), **TOL)
+        np.testing.assert_allclose([d.aleatoric, d.epistemic], [want[1][0], want[2][0]], **TOL)
         # The same scan, clockwise (negative increment), gives the same decision.
-        v2, w2, _, _ = rt.step(msg[::-1], math.pi - inc, -inc, 5.0, goal)
-        np.testing.assert_allclose([v2, w2], [v, w], **TOL)
+        d2 = rt.step(msg[::-1], math.pi - inc, -inc, 5.0, goal, age_s=0.0)
+        np.testing.assert_allclose([d2.v, d2.omega], [d.v, d.omega], **TOL)
         obs, _, term, trunc, info = env.step(u)
         if term or trunc:
             break
@@ -223,8 +231,8 @@ from pioneer.deploy import StudentRuntime
 
 rt = StudentRuntime(sys.argv[1])
 ranges = [1.0 + 0.5 * math.cos(3 * i * 2 * math.pi / 360) for i in range(360)]
-d = rt.step(ranges, -math.pi, 2 * math.pi / 360, 5.0, (2.0, 1.0))
-print(json.dumps({"decision": list(d), "heavy": heavy()}))
+d = rt.step(ranges, -math.pi, 2 * math.pi / 360, 5.0, (2.0, 1.0), age_s=0.01)
+print(json.dumps({"decision": [d.v, d.omega, d.aleatoric, d.epistemic], "heavy": heavy()}))
 """
 )
 
@@ -245,7 +253,7 @@ def test_deploy_runs_with_torch_numba_and_simulator_blocked(students):
     obs = observation_from_scan(ranges, -math.pi, 2 * math.pi / 360, 5.0, (2.0, 1.0))
     want = torch_outputs(model, obs[None])
     np.testing.assert_allclose(
-        out["decision"], [*want[0][0], want[1][0], want[2][0]], rtol=1e-5, atol=1e-5
+        out["decision"], [*clip(want[0][0]), want[1][0], want[2][0]], rtol=1e-5, atol=1e-5
     )
 
 

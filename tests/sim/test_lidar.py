@@ -609,17 +609,22 @@ def test_scan_adapter_coarse_scan_and_partial_coverage():
     out = resample_scan(src, 0.0, 2 * math.pi / 36, 10.0, CFG)
     assert out.shape == (72,)
     np.testing.assert_allclose(out[::2], src)
-    # A 180° scan in front (−90°..+90°): beams behind read max range.
+    # A 180° scan in front (−90°..+90°): beams behind are unseen, an obstacle at the robot by
+    # default, max range under the optimistic rule.
     half = np.full(181, 2.0)
-    out = resample_scan(half, -math.pi / 2, math.pi / 180, 10.0, CFG)
     angles = beam_angles(72)
+    out = resample_scan(half, -math.pi / 2, math.pi / 180, 10.0, CFG)
     assert np.all(out[np.abs(angles) <= math.pi / 2 + 1e-9] == 2.0)
+    assert np.all(out[np.abs(angles) > math.pi / 2 + 0.1] == 0.0)
+    out = resample_scan(half, -math.pi / 2, math.pi / 180, 10.0, CFG, unseen="max_range")
     assert np.all(out[np.abs(angles) > math.pi / 2 + 0.1] == 5.0)
 
 
-def test_scan_adapter_all_nan_reads_max_range():
-    obs = observation_from_scan(np.full(360, np.nan), -math.pi, 2 * math.pi / 360, 10.0, (1, 0))
-    assert np.all(obs[:26] == 5.0)
+@pytest.mark.parametrize(("unseen", "value"), [("obstacle", 0.0), ("max_range", 5.0)])
+def test_scan_adapter_all_nan_reads_the_unseen_fill(unseen, value):
+    nan = np.full(360, np.nan)
+    obs = observation_from_scan(nan, -math.pi, 2 * math.pi / 360, 10.0, (1, 0), None, 0.0, unseen)
+    assert np.all(obs[:26] == value)
     # Ties keep the lowest beam index: beams 0 and 1.
     assert obs[26] == 0.0
     assert obs[27] == np.float32(2 * math.pi / 72)

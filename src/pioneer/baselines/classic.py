@@ -15,7 +15,7 @@ import numpy as np
 from annotated_types import Ge
 from numpy.typing import NDArray
 
-from pioneer.config import NonNegative, Positive
+from pioneer.bounds import NonNegative, Positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World

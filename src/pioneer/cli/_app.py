@@ -92,7 +92,13 @@ _TREE = _Group(
         ),
         "study": _Group(
             "paper studies",
-            {"static": _Leaf("reward:StudyStatic", "the synthetic static study (paper Fig. 3)")},
+            {
+                "static": _Leaf("reward:StudyStatic", "the synthetic static study (paper Fig. 3)"),
+                "blind-sector": _Leaf(
+                    "learning:StudyBlindSector",
+                    "students with a narrower scanner under each fill rule of unseen directions",
+                ),
+            },
         ),
     },
 )

@@ -18,11 +18,15 @@ from pioneer.cli._common import (
     Workers,
     command_line,
     default,
+    metavar,
     one_of,
     optional,
+    require_some,
 )
 from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
+from pioneer.laser import UNSEEN_RULES
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
 
 if TYPE_CHECKING:
@@ -30,13 +34,15 @@ if TYPE_CHECKING:
     ActionMode: TypeAlias = str
     LabelPrev: TypeAlias = str
     Expert: TypeAlias = str
+    UnseenRule: TypeAlias = str
 else:
     Student = one_of(("mdn", "mlp"))
     ActionMode = one_of(ACTION_MODES)
     LabelPrev = one_of(LABEL_PREV)
     Expert = one_of(EXPERTS)
+    UnseenRule = one_of(UNSEEN_RULES)
 
-__all__ = ["Distill", "TrainCrowdNav"]
+__all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,4 +168,30 @@ class TrainCrowdNav:
         )
         print(to_json({"out": self.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
         print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyBlindSector:
+    """The shipped students through the robot runtime with a scanner of narrower field of view,
+    under each fill rule of unseen directions (validation seeds; docs/student.md); writes
+    OUT/summary.json and OUT/episodes.jsonl, prints one line per scenario and variant."""
+
+    out: OutDir
+    """output folder"""
+    scenario: Annotated[tuple[str, ...], metavar("NAME")] = default(
+        run_blind_sector_study, "scenarios"
+    )
+    """scenarios with a shipped student"""
+    episodes: int = default(run_blind_sector_study, "episodes")
+    """validation episodes per scenario and variant"""
+    fov: float = default(run_blind_sector_study, "fov_deg")
+    """[°] the scanner's field of view, centred on the heading"""
+    rules: tuple[UnseenRule, ...] = default(run_blind_sector_study, "rules")
+    """fill rules of unseen directions"""
+
+    def run(self) -> int:
+        """Run the study."""
+        require_some("--scenario", self.scenario)
+        run_blind_sector_study(self.out, self.scenario, self.episodes, self.fov, self.rules)
         return 0

@@ -28,9 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from tqdm import tqdm
-
-from pioneer.deploy.runtime import StudentRuntime
+from pioneer.deploy.runtime import Decision, StudentRuntime
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
 from pioneer.io import atomic_path
 from pioneer.laser import LidarConfig
@@ -46,8 +44,19 @@ __all__ = [
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
-CSV_COLUMNS = ("stamp_s", "bag_time_s", "v", "omega", "aleatoric", "epistemic")
-INSTALL_HINT = "pip install 'pioneer-nav[ros]'"
+CSV_COLUMNS = (
+    "stamp_s",
+    "bag_time_s",
+    "v",
+    "omega",
+    "aleatoric",
+    "epistemic",
+    "stop_reason",
+    "valid_share",
+    "coverage_rad",
+    "age_s",
+)
+INSTALL_HINT = "pip install 'pioneer-nav[ros]' (or, for the light runtime, './runtime[ros]')"
 GOAL_FRAMES = ("robot", "odom")
 _BAG_FIX = "check that it is a complete ROS 1 .bag or ROS 2 bag directory"
 
@@ -138,6 +147,17 @@ def _check_bag(bag: Path) -> None:
         )
 
 
+def _tqdm() -> Any:
+    """tqdm's progress bar class (the light runtime installs it with its [ros] extra)."""
+    try:
+        from tqdm import tqdm
+    except ImportError as exc:
+        raise ConfigError(
+            expect("bag replay", "tqdm installed", f"ImportError ({exc})", INSTALL_HINT)
+        ) from exc
+    return tqdm
+
+
 def _open_reader(bag: Path) -> Any:
     """An open rosbags ``AnyReader`` on ``bag``; DataError/ConfigError on failure."""
     try:
@@ -157,7 +177,12 @@ def _open_reader(bag: Path) -> Any:
     return reader
 
 
-def _command_row(msg: Any, t_ns: int, d: Any) -> tuple[str, ...]:
+def _stamp_ns(msg: Any) -> int:
+    stamp = msg.header.stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _command_row(msg: Any, t_ns: int, d: Decision) -> tuple[str, ...]:
     stamp = msg.header.stamp
     return (
         _seconds(stamp.sec, stamp.nanosec),
@@ -166,6 +191,10 @@ def _command_row(msg: Any, t_ns: int, d: Any) -> tuple[str, ...]:
         repr(d.omega),
         repr(d.aleatoric),
         repr(d.epistemic),
+        d.stop_reason or "",
+        repr(d.valid_share),
+        repr(d.coverage_rad),
+        repr(d.age_s),
     )
 
 
@@ -177,8 +206,10 @@ def _replay_messages(
     goal: tuple[float, float],
     bag: Path,
     bar: Any,
+    stops: dict[str, int],
 ) -> tuple[int, int, int]:
-    """Write one CSV row per scan of ``topics[0]``; returns (scans, rows, skipped)."""
+    """Write one CSV row per scan of ``topics[0]`` and count the stops by reason in
+    ``stops``; returns (scans, rows, skipped)."""
     scan, odom = topics
     conns = [c for c in reader.connections if c.topic in (scan, odom)]
     rows, skipped, k = 0, 0, 0
@@ -203,9 +234,12 @@ def _replay_messages(
                 float(msg.range_max),
                 goal_robot,
                 range_min=float(msg.range_min),
+                age_s=(t_ns - _stamp_ns(msg)) * 1e-9,
             )
         except PioneerError as exc:  # name the message; the cause says what and fix
             raise DataError(f"{bag}: {scan} message {k} (bag time {t_ns} ns): {exc}") from exc
+        if d.stop_reason is not None:
+            stops[d.stop_reason] = stops.get(d.stop_reason, 0) + 1
         out.writerow(_command_row(msg, t_ns, d))
         rows += 1
     return k, rows, skipped
@@ -229,9 +263,13 @@ def replay_bag(
     ``(x, y)`` [m] in ``goal_frame`` (see the module docstring); ``scan_topic`` and
     ``odom_topic`` default to the bag's only topic of that type. The CSV (written atomically)
     has the columns :data:`CSV_COLUMNS`: the scan's header stamp and its bag (receive) time,
-    both in seconds, then the decision ``v`` [m/s], ``omega`` [rad/s], ``aleatoric`` and
-    ``epistemic`` [(m/s)² + (rad/s)²] (NaN for a regression student). Returns a summary:
-    ``out``, ``bag``, ``scan_topic``, ``odom_topic``, ``scans``, ``rows``, ``skipped``.
+    both in seconds, then the decision ``v`` [m/s], ``omega`` [rad/s] (clipped; 0, 0 on a
+    stop), ``aleatoric`` and ``epistemic`` [(m/s)² + (rad/s)²] (NaN for a regression student
+    or a stop), and the scan's health: ``stop_reason`` (empty when the student drove, else one
+    of :data:`~pioneer.deploy.runtime.STOP_REASONS`), ``valid_share``, ``coverage_rad`` [rad]
+    and ``age_s`` [s], the bag time minus the header stamp (the replay decides when a scan is
+    received). Returns a summary: ``out``, ``bag``, ``scan_topic``, ``odom_topic``,
+    ``scans``, ``rows``, ``skipped`` and ``stops`` (stop decisions by reason).
 
     Raises :class:`DataError` for a missing or unreadable bag, no (or several) LaserScan
     topics, or a malformed scan; :class:`ConfigError` for a bad goal or goal frame.
@@ -240,6 +278,7 @@ def replay_bag(
     bag = Path(bag_path)
     _check_bag(bag)
     runtime = _runtime(model_onnx, lidar)
+    tqdm = _tqdm()
     reader = _open_reader(bag)
     from rosbags.highlevel import AnyReaderError
 
@@ -252,6 +291,7 @@ def replay_bag(
             else None
         )
         n_scans = sum(c.msgcount for c in reader.connections if c.topic == scan)
+        stops: dict[str, int] = {}
         with (
             atomic_path(Path(out_csv)) as tmp,
             tmp.open("w", newline="") as fh,
@@ -261,7 +301,9 @@ def replay_bag(
         ):
             out = csv.writer(fh)
             out.writerow(CSV_COLUMNS)
-            k, rows, skipped = _replay_messages(reader, runtime, out, (scan, odom), g, bag, bar)
+            k, rows, skipped = _replay_messages(
+                reader, runtime, out, (scan, odom), g, bag, bar, stops
+            )
     except AnyReaderError as exc:
         raise DataError(
             expect(f"ROS bag {bag}", "readable messages", _one_line(exc), _BAG_FIX)
@@ -278,4 +320,5 @@ def replay_bag(
         "scans": k,
         "rows": rows,
         "skipped": skipped,
+        "stops": stops,
     }

@@ -1,15 +1,42 @@
 """The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (SPEC 6).
 
 Imports numpy, onnxruntime and :mod:`pioneer.laser` only — never torch, numba or the
-simulator — so it runs on a robot computer with ``pip install pioneer-nav[deploy]``, starts in
-well under a second and compiles nothing at its first scan. The ONNX file comes from
+simulator — so it runs on a robot computer with the light distribution
+``pip install ./runtime`` (numpy and onnxruntime, README "Install"), starts in well under a
+second and compiles nothing at its first scan. The ONNX file comes from
 :func:`pioneer.learn.export.export_onnx`; its graph already computes the deterministic action
 and the aleatoric/epistemic uncertainty, so a decision is one ``session.run`` on a batch of 1.
+
+**Scan health.** Every :meth:`StudentRuntime.step` reports the share of the scan's beams that
+are valid (a return in [range_min, range_max], or "no return": ``+inf`` or above
+``range_max``), the angle around the robot the scan saw (``coverage_rad``: the simulator's 72
+directions with a valid beam within 2.5°, × 5°) and the scan's age. It never drives on a scan
+it cannot trust: it returns v = ω = 0 with ``stop_reason`` set to the first of
+:data:`STOP_REASONS` that applies —
+
+- ``"invalid"``: no beam returned a range (all NaN, all ``+inf``, all zero or below
+  ``range_min``): a dead or blinded sensor, not an empty room;
+- ``"sparse"``: fewer than ``min_valid_share`` (default 50 %) of the beams are valid;
+- ``"stale"``: the scan's age is NaN, above ``max_age_s`` (default 0.5 s), or below
+  −``max_age_s`` (a stamp from the future: the clocks disagree); without ``age_s`` the age
+  is not checked;
+- ``"action"``: the student's output was not finite.
+
+A direction the scanner does not see (the rear of a 270° scanner, or beams without a valid
+range) is filled by the rule ``RuntimeConfig.unseen`` (:data:`pioneer.laser.UNSEEN_RULES`);
+the default, ``"obstacle"`` (range 0), never reports free space the sensor did not observe,
+and the shipped students keep their success rate under it with a 270° scanner
+(docs/student.md). A stop is not a fault: the next good scan drives again.
+
+**Command limits.** Every command leaves clipped to ``v ∈ [v_min, v_max]`` and
+``|ω| ≤ omega_max`` (:class:`RuntimeConfig`, defaults those of the simulated robot,
+:mod:`pioneer.limits`): the MDN's slightly negative v (down to −0.045 m/s) leaves as 0.
 
 Wiring a ROS 2 ``sensor_msgs/LaserScan`` topic (sketch; rclpy and tf2 are not dependencies)::
 
     import rclpy
     from geometry_msgs.msg import Twist
+    from rclpy.time import Time
     from sensor_msgs.msg import LaserScan
     from pioneer.deploy import StudentRuntime
 
@@ -22,63 +49,137 @@ Wiring a ROS 2 ``sensor_msgs/LaserScan`` topic (sketch; rclpy and tf2 are not de
 
         def on_scan(self, msg):
             gx, gy = self.goal_in_base_link()  # goal (x, y) [m] in the robot frame, from tf2
+            age = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
             d = self.runtime.step(msg.ranges, msg.angle_min, msg.angle_increment,
-                                  msg.range_max, (gx, gy), range_min=msg.range_min)
+                                  msg.range_max, (gx, gy), range_min=msg.range_min, age_s=age)
             out = Twist()
-            out.linear.x, out.angular.z = d.v, d.omega
+            out.linear.x, out.angular.z = d.v, d.omega  # 0, 0 on a stop (log d.stop_reason)
             self.cmd.publish(out)  # log d.aleatoric / d.epistemic, or gate on them (shield)
 
 The scan must be in a frame whose origin is the robot centre, x forward, counter-clockwise
 positive (``base_link``); if the laser is mounted off-centre or upside down, transform or
-reverse the ranges first (a negative ``angle_increment`` is handled). ``+inf`` ranges mean "no
-return" (REP 117) and NaNs are ignored, as in :func:`pioneer.laser.resample_scan`. The
-runtime does not clip the command: pass it through the base's velocity limits (in
-simulation, :func:`pioneer.sim.robot.clip_command` with the robot's ``RobotConfig`` does this).
+reverse the ranges first (a negative ``angle_increment`` is handled). A malformed message (no
+beams, a zero or non-finite ``angle_increment``, a non-finite header, a non-finite goal) is a
+caller's bug, not sensor health: it raises :class:`~pioneer.errors.DataError`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.errors import DataError, expect
-from pioneer.laser import LidarConfig, observation_from_scan
+from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.laser import (
+    DEFAULT_UNSEEN,
+    UNSEEN_RULES,
+    LidarConfig,
+    ScanReading,
+    observation_from_beams,
+    read_scan,
+)
+from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN
 
 __all__ = [
     "ONNX_FORMAT",
+    "STOP_REASONS",
     "Decision",
     "OnnxStudentPolicy",
+    "RuntimeConfig",
     "StudentRuntime",
     "make_onnx_student_policy",
 ]
 
 ONNX_FORMAT = "pioneer.student-onnx/1"  # written by pioneer.learn.export.export_onnx
+STOP_REASONS = ("invalid", "sparse", "stale", "action")  # in the order they are checked
 
 
-class Decision(NamedTuple):
-    """One decision: the command and its uncertainty (NaN for a regression student)."""
+@dataclasses.dataclass(frozen=True)
+class RuntimeConfig(Config):
+    """Scan health limits, the fill rule of unseen directions and the robot's command limits.
+
+    ``max_age_s``: the student decides every 0.1 s on a scan whose stamp is the start of its
+    0.1 s sweep, and drivers add 10–50 ms of transport, so a fresh scan is 0.1–0.2 s old;
+    0.5 s tolerates two or three lost scans of a 10 Hz scanner, while the robot at v_max and a
+    human walking at 0.6 m/s close at most 0.7 m unseen — beyond that, stop.
+    ``min_valid_share``: below half the beams valid, the scan more likely comes from a dirty
+    window, a blocked sensor or a driver fault than from the room.
+    """
+
+    max_age_s: float = 0.5  # [s]
+    min_valid_share: float = 0.5  # share of the scan's beams in [0, 1]
+    unseen: str = DEFAULT_UNSEEN  # fill of unseen directions, one of UNSEEN_RULES
+    v_min: float = V_MIN  # [m/s]
+    v_max: float = V_MAX  # [m/s]
+    omega_max: float = OMEGA_MAX  # [rad/s] |ω| ≤ omega_max
+
+    def __post_init__(self) -> None:
+        check_positive("RuntimeConfig", "max_age_s", self.max_age_s)
+        check_nonnegative("RuntimeConfig", "v_min", self.v_min)
+        check_positive("RuntimeConfig", "v_max", self.v_max)
+        check_positive("RuntimeConfig", "omega_max", self.omega_max)
+        if not 0.0 <= self.min_valid_share <= 1.0:
+            raise ConfigError(
+                expect(
+                    "RuntimeConfig.min_valid_share", "in [0, 1]", self.min_valid_share, "use 0.5"
+                )
+            )
+        if self.unseen not in UNSEEN_RULES:
+            raise ConfigError(
+                expect(
+                    "RuntimeConfig.unseen", f"one of {UNSEEN_RULES}", self.unseen, "use 'obstacle'"
+                )
+            )
+        if self.v_min > self.v_max:
+            raise ConfigError(
+                expect("RuntimeConfig.v_min", f"<= v_max={self.v_max}", self.v_min, "lower v_min")
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class Decision:
+    """One decision: the command (clipped to the robot's limits; 0, 0 on a stop), its
+    uncertainty, and the health of the scan it was made on (NaN where there was no scan or
+    no age)."""
 
     v: float  # [m/s]
     omega: float  # [rad/s]
-    aleatoric: float  # [(m/s)² + (rad/s)²] Σ_k π_k Σ_d σ_kd²
-    epistemic: float  # [(m/s)² + (rad/s)²] Σ_k π_k ‖μ_k − μ̄‖²
+    aleatoric: float  # [(m/s)² + (rad/s)²] Σ_k π_k Σ_d σ_kd²; NaN for an MLP or a stop
+    epistemic: float  # [(m/s)² + (rad/s)²] Σ_k π_k ‖μ_k − μ̄‖²; NaN for an MLP or a stop
+    stop_reason: str | None = None  # one of STOP_REASONS, None when the student drove
+    valid_share: float = math.nan  # share of the scan's beams that were valid
+    coverage_rad: float = math.nan  # [rad] angle around the robot the scan saw (≤ 2π)
+    age_s: float = math.nan  # [s] the scan's age as given (NaN: not given)
+
+    @property
+    def stopped(self) -> bool:
+        """Whether this is a stop command (see :data:`STOP_REASONS`)."""
+        return self.stop_reason is not None
 
 
 class StudentRuntime:
     """An exported student running under ONNX Runtime (CPU, ``threads`` intra-op threads).
 
     ``lidar`` must match the simulator's LiDAR the student was trained with (default
-    :class:`LidarConfig`: 72 beams, sectors of 3, 5 m). Raises :class:`DataError` when the
-    file is missing, not ONNX, or not a PioneeR student graph.
+    :class:`LidarConfig`: 72 beams, sectors of 3, 5 m); ``config`` sets the scan health
+    limits, the unseen-direction rule and the command limits (:class:`RuntimeConfig`).
+    Raises :class:`DataError` when the file is missing, not ONNX, or not a PioneeR student
+    graph.
     """
 
     def __init__(
-        self, onnx_path: str | Path, lidar: LidarConfig | None = None, threads: int = 1
+        self,
+        onnx_path: str | Path,
+        lidar: LidarConfig | None = None,
+        threads: int = 1,
+        config: RuntimeConfig | None = None,
     ) -> None:
         import onnxruntime as ort
 
@@ -107,6 +208,7 @@ class StudentRuntime:
         self.action_mode: str = meta.get("action_mode", "?")
         self.config: dict[str, Any] = json.loads(meta.get("config", "{}"))
         self.lidar = lidar or LidarConfig()
+        self.runtime_config = config or RuntimeConfig()
         self.obs_dim = int(self.config.get("obs_dim", self.lidar.obs_dim))
         if self.obs_dim != self.lidar.obs_dim:
             raise DataError(
@@ -125,8 +227,9 @@ class StudentRuntime:
     def decide_batch(
         self, obs: NDArray[np.floating]
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
-        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``;
-        the uncertainties are NaN for a regression (MLP) student."""
+        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``:
+        the graph's raw outputs, for analysis (the action is not clipped; :meth:`decide` and
+        :meth:`step` clip it); the uncertainties are NaN for a regression (MLP) student."""
         x = np.ascontiguousarray(obs, dtype=np.float32)
         if x.ndim != 2 or x.shape[1] != self.obs_dim:
             raise DataError(
@@ -142,9 +245,9 @@ class StudentRuntime:
         return action, aleatoric, epistemic
 
     def decide(self, obs: NDArray[np.floating]) -> Decision:
-        """The decision for one observation ``(29,)`` (see :class:`Decision`)."""
-        a, al, ep = self.decide_batch(np.reshape(obs, (1, -1)))
-        return Decision(float(a[0, 0]), float(a[0, 1]), float(al[0]), float(ep[0]))
+        """The decision for one observation ``(29,)``, clipped to the command limits (a
+        non-finite action is a stop with reason ``"action"``); no scan, so no scan health."""
+        return self._decide(obs, math.nan, math.nan, math.nan)
 
     def step(
         self,
@@ -154,14 +257,66 @@ class StudentRuntime:
         range_max: float,
         goal_xy_robot: tuple[float, float] | NDArray[np.float64],
         range_min: float = 0.0,
+        *,
+        age_s: float | None = None,
     ) -> Decision:
-        """Scan → command: ``ranges`` [m] with ROS ``LaserScan`` conventions (angles [rad]) and
-        the goal ``(x, y)`` [m] in the robot frame → ``Decision(v, omega, aleatoric, epistemic)``
-        (unpacks as a 4-tuple)."""
-        obs = observation_from_scan(
-            ranges, angle_min, angle_increment, range_max, goal_xy_robot, self.lidar, range_min
+        """Scan → command: ``ranges`` [m] with ROS ``LaserScan`` conventions (angles [rad]),
+        the goal ``(x, y)`` [m] in the robot frame and the scan's age [s] at decision time
+        (now − header stamp) → a :class:`Decision`, a stop when the scan is unhealthy (module
+        docstring). Without ``age_s`` the age is not checked (reported NaN): a robot node
+        should always pass it."""
+        cfg = self.runtime_config
+        reading = read_scan(
+            ranges, angle_min, angle_increment, range_max, self.lidar, range_min, cfg.unseen
         )
-        return self.decide(obs)
+        obs = observation_from_beams(reading.beams, goal_xy_robot, self.lidar)
+        age = math.nan if age_s is None else float(age_s)
+        reason = self._scan_fault(reading, age_s)
+        if reason is not None:
+            return _stop(reason, reading.valid_share, reading.coverage_rad, age)
+        return self._decide(obs, reading.valid_share, reading.coverage_rad, age)
+
+    def _scan_fault(self, reading: ScanReading, age_s: float | None) -> str | None:
+        """The first of STOP_REASONS the scan has, or None."""
+        cfg = self.runtime_config
+        if reading.returns == 0:
+            return "invalid"
+        if reading.valid_share < cfg.min_valid_share:
+            return "sparse"
+        if age_s is not None and not abs(float(age_s)) <= cfg.max_age_s:  # NaN: stale too
+            return "stale"
+        return None
+
+    def _decide(
+        self, obs: NDArray[np.floating], valid_share: float, coverage_rad: float, age_s: float
+    ) -> Decision:
+        a, al, ep = self.decide_batch(np.reshape(obs, (1, -1)))
+        v, w = float(a[0, 0]), float(a[0, 1])
+        if not (math.isfinite(v) and math.isfinite(w)):
+            return _stop("action", valid_share, coverage_rad, age_s)
+        cfg = self.runtime_config
+        return Decision(
+            v=min(max(v, cfg.v_min), cfg.v_max),
+            omega=min(max(w, -cfg.omega_max), cfg.omega_max),
+            aleatoric=float(al[0]),
+            epistemic=float(ep[0]),
+            valid_share=valid_share,
+            coverage_rad=coverage_rad,
+            age_s=age_s,
+        )
+
+
+def _stop(reason: str, valid_share: float, coverage_rad: float, age_s: float) -> Decision:
+    return Decision(
+        v=0.0,
+        omega=0.0,
+        aleatoric=math.nan,
+        epistemic=math.nan,
+        stop_reason=reason,
+        valid_share=valid_share,
+        coverage_rad=coverage_rad,
+        age_s=age_s,
+    )
 
 
 class OnnxStudentPolicy:

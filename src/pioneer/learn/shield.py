@@ -25,7 +25,7 @@ import numpy as np
 from annotated_types import Interval
 from numpy.typing import NDArray
 
-from pioneer.config import NonNegative
+from pioneer.bounds import NonNegative
 from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy
 from pioneer.control.teacher import LookaheadTeacher

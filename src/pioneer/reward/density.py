@@ -29,7 +29,8 @@ import scipy.linalg
 from annotated_types import Ge
 from numpy.typing import ArrayLike, NDArray
 
-from pioneer.config import Config, Positive
+from pioneer.bounds import Positive
+from pioneer.config import Config
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, load_npz
 from pioneer.reward.fastexp import exp_shifted_inplace

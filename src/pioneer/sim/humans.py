@@ -43,7 +43,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.config import Config, NonNegative, Positive
+from pioneer.bounds import NonNegative, Positive
+from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.geometry import closest_point_on_segment, norm2d, wall_offsets
 

@@ -14,8 +14,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.config import Config, NonNegative, Positive
+from pioneer.bounds import NonNegative, Positive
+from pioneer.config import Config
 from pioneer.errors import CommandError, ConfigError, expect
+from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN
 
 __all__ = ["RobotConfig", "clip_command", "integrate_unicycle", "validate_command", "wrap_angle"]
 
@@ -25,9 +27,9 @@ class RobotConfig(Config):
     """Robot body and command limits."""
 
     radius: Positive = 0.3  # [m] r_r
-    v_min: NonNegative = 0.0  # [m/s]
-    v_max: Positive = 0.8  # [m/s]
-    omega_max: Positive = 0.4 * math.pi  # [rad/s] |ω| ≤ omega_max
+    v_min: NonNegative = V_MIN  # [m/s] (defaults: pioneer.limits, shared with the runtime)
+    v_max: Positive = V_MAX  # [m/s]
+    omega_max: Positive = OMEGA_MAX  # [rad/s] |ω| ≤ omega_max
 
     def __post_init__(self) -> None:
         if self.v_min > self.v_max:
