@@ -540,3 +540,37 @@ def test_the_example_scenario_file_loads_and_every_variant_samples(clean_registr
         assert sc.scenario_base(name) in ("hr-rl", "hl-rr", "static")
         if sc.scenario_base(name) != "static":
             shipped_student(name)
+
+
+def test_every_refused_variant_of_a_file_is_reported_at_once(clean_registry, tmp_path):
+    sc = clean_registry
+    data = {
+        "format": "pioneer.scenarios/1",
+        "scenarios": {
+            "fine": {"elevator": {}},
+            "narrow": {"elevator": {"lobby_width": 0.5}},
+            "crowd": {"elevator": {"n_boarding": -1}},
+        },
+    }
+    with pytest.raises(ScenarioError) as err:
+        sc.load_scenario_file(_write(tmp_path, data))
+    msg = str(err.value)
+    assert "2 variants refused" in msg and "\n" not in msg
+    assert_house_message(msg, "'narrow'", "lobby_width", "'crowd'", "n_boarding")
+    assert "'fine'" not in msg and "fine" not in sc.scenario_names()
+
+
+def test_a_noisy_lidar_works_for_the_teacher(clean_registry, tmp_path):
+    """The teacher plans on noise-free rays (observe_states ignores the noise); the policy's
+    own observation is noisy."""
+    from pioneer.control.registry import build_policy
+    from pioneer.eval.episode import run_episode
+
+    sc = clean_registry
+    data = {
+        "format": "pioneer.scenarios/1",
+        "scenarios": {"noisy": {"static": {}, "sim": {"lidar": {"noise_std": 0.05}}}},
+    }
+    sc.load_scenario_file(_write(tmp_path, data))
+    rec, _ = run_episode("noisy", build_policy("teacher", "static"), 0)
+    assert rec.event in {"success", "collision", "timeout"} and rec.steps > 0

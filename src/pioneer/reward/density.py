@@ -184,7 +184,9 @@ class DensityReward:
         d = z.shape[1]
         self.feature_names = list(feature_names) if feature_names else [f"z{i}" for i in range(d)]
         if len(self.feature_names) != d:
-            raise DataError(expect("feature_names", f"{d} names", len(self.feature_names), "fix"))
+            raise DataError(
+                expect("feature_names", f"{d} names", len(self.feature_names), "name every feature")
+            )
         if cfg.standardize:
             self.mean_ = z.mean(axis=0)
             std = z.std(axis=0)

@@ -449,16 +449,16 @@ def observe(
 
 
 def observe_states(world: World, states: Sequence[State]) -> NDArray[np.float32]:
-    """``observe`` of several noise-free states at once, shape ``(len(states), B, 29)``.
+    """``observe`` of several states at once without sensor noise, shape
+    ``(len(states), B, 29)``.
 
-    The same values as observing each state alone, with one ray-casting call for all of them
-    (the teacher observes its 10 rollout states of 120 copies this way).
+    The same values as observing each state alone with a noise-free LiDAR, with one
+    ray-casting call for all of them (the teacher observes its 10 rollout states of 120 copies
+    this way). The world's ``lidar.noise_std`` is not applied: a planner predicts the expected
+    scan of a future state, so the teacher plans on noise-free rays even in a world whose
+    LiDAR is noisy (the noise reaches the policies that act on the observation).
     """
     lid = world.sim.lidar
-    if lid.noise_std > 0.0:
-        raise ConfigError(
-            expect("observe_states", "a noise-free LiDAR", lid.noise_std, "use observe(rng=…)")
-        )
     if not states:
         return np.empty((0, 0, lid.obs_dim), dtype=np.float32)
     n_b = states[0].batch_size

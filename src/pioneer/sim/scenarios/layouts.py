@@ -92,7 +92,9 @@ class ElevatorLayout(Config):
                 check_range("ElevatorLayout", name, *value)
         if self.human_side not in ("right", "left"):
             raise ScenarioError(
-                expect("ElevatorLayout.human_side", "'right' or 'left'", self.human_side, "fix")
+                expect(
+                    "ElevatorLayout.human_side", "'right' or 'left'", self.human_side, "use 'right'"
+                )
             )
         if self.door_width > self.cabin_width:
             raise ScenarioError(
@@ -115,7 +117,11 @@ class ElevatorLayout(Config):
         for name in ("n_boarding", "n_exiting"):
             n = getattr(self, name)
             if not isinstance(n, int) or n < 0:
-                raise ScenarioError(expect(f"ElevatorLayout.{name}", "an integer >= 0", n, "fix"))
+                raise ScenarioError(
+                    expect(
+                        f"ElevatorLayout.{name}", "an integer >= 0", n, f"set {name} to 0 or more"
+                    )
+                )
         n_route = 2 + len(self.exit_waypoints or ())
         for name, n_max in (("exit_release_waypoint", n_route), ("boarder_release_waypoint", 2)):
             k = getattr(self, name)

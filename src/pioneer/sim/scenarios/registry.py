@@ -200,33 +200,48 @@ def load_scenario_file(path: str | Path) -> list[str]:
         )
     factories: dict[str, Callable[[], ScenarioConfig]] = {}
     bases: dict[str, str | None] = {}
+    refused: list[str] = []  # every variant's error, reported together
     for name, entry in entries.items():
-        where = f"scenario file {p}: {name!r}"
-        _check_new_name(where, name)
-        kinds = sorted(set(entry) & set(_KINDS)) if isinstance(entry, dict) else []
-        extra = (
-            sorted(set(entry) - set(_KINDS) - {"sim", "base"}) if isinstance(entry, dict) else []
-        )
-        if len(kinds) != 1 or extra:
-            raise ScenarioError(
-                expect(
-                    where,
-                    f"exactly one of {sorted(_KINDS)} (plus optional 'sim' and 'base')",
-                    sorted(entry) if isinstance(entry, dict) else entry,
-                    'e.g. {"elevator": {"lobby_depth": 2.8}}',
-                )
-            )
         try:
-            factories[name] = _scenario_factory(name, kinds[0], entry[kinds[0]], entry.get("sim"))
-            cfg = factories[name]()  # build it once: placement errors name the file and variant
+            factories[name], bases[name] = _load_variant(p, name, entry)
         except PioneerError as exc:
-            raise ScenarioError(f"{where}: {exc}") from exc
-        _check_placement(where, cfg)
-        _check_base(where, entry.get("base"))
-        bases[name] = entry.get("base")
+            refused.append(str(exc).removeprefix(f"scenario file {p}: "))
+    if len(refused) == 1:
+        raise ScenarioError(f"scenario file {p}: {refused[0]}")
+    if refused:
+        listing = " | ".join(refused)
+        raise ScenarioError(f"scenario file {p}: {len(refused)} variants refused: {listing}")
     for name, factory in factories.items():  # all or nothing: register only a valid file
         _register(name, factory, bases[name])
     return list(factories)
+
+
+def _load_variant(
+    p: Path, name: str, entry: Any
+) -> tuple[Callable[[], ScenarioConfig], str | None]:
+    """One variant of a scenario file, checked (its layout, settings, base and the placement
+    of its start states): its factory and base. Errors name the file and the variant."""
+    where = f"scenario file {p}: {name!r}"
+    _check_new_name(where, name)
+    kinds = sorted(set(entry) & set(_KINDS)) if isinstance(entry, dict) else []
+    extra = sorted(set(entry) - set(_KINDS) - {"sim", "base"}) if isinstance(entry, dict) else []
+    if len(kinds) != 1 or extra:
+        raise ScenarioError(
+            expect(
+                where,
+                f"exactly one of {sorted(_KINDS)} (plus optional 'sim' and 'base')",
+                sorted(entry) if isinstance(entry, dict) else entry,
+                'e.g. {"elevator": {"lobby_depth": 2.8}}',
+            )
+        )
+    try:
+        factory = _scenario_factory(name, kinds[0], entry[kinds[0]], entry.get("sim"))
+        cfg = factory()  # build it once: placement errors name the file and variant
+    except PioneerError as exc:
+        raise ScenarioError(f"{where}: {exc}") from exc
+    _check_placement(where, cfg)
+    _check_base(where, entry.get("base"))
+    return factory, entry.get("base")
 
 
 def load_env_scenarios() -> None:

@@ -78,7 +78,12 @@ class HumanSpec(Config):
             not (math.isfinite(v) and v >= 0) for v in self.v_pref_choices
         ):
             raise ScenarioError(
-                expect("HumanSpec.v_pref_choices", "non-empty, >= 0", self.v_pref_choices, "fix")
+                expect(
+                    "HumanSpec.v_pref_choices",
+                    "non-empty, >= 0",
+                    self.v_pref_choices,
+                    "list speeds >= 0 [m/s]",
+                )
             )
 
 
@@ -102,7 +107,12 @@ class ScenarioConfig(Config):
         xmin, xmax, ymin, ymax = self.bounds
         if not (xmin < xmax and ymin < ymax):
             raise ScenarioError(
-                expect("ScenarioConfig.bounds", "xmin < xmax, ymin < ymax", self.bounds, "fix")
+                expect(
+                    "ScenarioConfig.bounds",
+                    "xmin < xmax, ymin < ymax",
+                    self.bounds,
+                    "order the bounds (xmin, xmax, ymin, ymax)",
+                )
             )
         for i, h in enumerate(self.humans):
             bad = [j for j in h.wait_for if not 0 <= j < len(self.humans) or j == i]
