@@ -291,10 +291,12 @@ class StaticStudyLayout(Config):
     start_y: float = -2.4  # [m] robot start row (below the human)
     goal_y: float = 2.4  # [m] robot goal row (above the human)
     start_half_width: float = 0.3  # [m] start x ∈ ±this
+    human_x: float = 0.0  # [m] the static human's position
+    human_y: float = 0.0  # [m]
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            if f.name not in ("start_y", "goal_y", "start_half_width"):
+            if f.name not in ("start_y", "goal_y", "start_half_width", "human_x", "human_y"):
                 check_positive("StaticStudyLayout", f.name, getattr(self, f.name))
 
 
@@ -312,8 +314,8 @@ def static_study_scenario(
     )
     human = HumanSpec(
         role="static",
-        start=Region(x=(0.0, 0.0), y=(0.0, 0.0)),
-        goal=Region(x=(0.0, 0.0), y=(0.0, 0.0)),
+        start=Region(x=(lay.human_x, lay.human_x), y=(lay.human_y, lay.human_y)),
+        goal=Region(x=(lay.human_x, lay.human_x), y=(lay.human_y, lay.human_y)),
         radius=lay.human_radius,
         v_pref_choices=(0.0,),
         static=True,
