@@ -205,3 +205,21 @@ def test_missing_optional_dependency_is_one_line_naming_the_extra(tmp_path, caps
     code = main(argv("export", tmp_path / "s.onnx"))
     _one_error_line(capsys, code, "module onnx", "pip install 'pioneer-nav[learn]'")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (
+            "eval --policy goal --scenario static --workers 0 --out OUT",
+            "--workers: expected an integer >= 1",
+        ),
+        ("run --scenario static --seed -1", "--seed: expected an integer >= 0"),
+        ("distill --scenario static --workers -2 --out OUT", "--workers"),
+    ],
+)
+def test_option_bounds_are_checked_before_any_work(args, needle, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main([str(out) if w == "OUT" else w for w in args.split()])
+    _one_error_line(capsys, code, needle, "fix:")
+    assert not out.exists()

@@ -33,6 +33,7 @@ from pioneer.errors import ConfigError, expect
 __all__ = [
     "Config",
     "check_nonnegative",
+    "check_option_bounds",
     "check_parameters",
     "check_positive",
     "check_range",
@@ -59,16 +60,16 @@ class _Bounds:
             parts.append(f"{'<' if self.upper_strict else '<='} {self.upper:g}")
         return " and ".join(parts)
 
-    def check(self, owner: str, name: str, value: object) -> None:
-        """Raise :class:`ConfigError` unless ``value`` lies within the bounds."""
+    def check(self, owner: str, name: str, value: object, label: str | None = None) -> None:
+        """Raise :class:`ConfigError` unless ``value`` lies within the bounds; the message
+        names ``label`` (default ``owner.name``)."""
         if value is None and self.optional:
             return
         if not self._accepts(value):
             rng = self.describe()
             kind = "an integer" if self.integer else "a finite number"
-            raise ConfigError(
-                expect(f"{owner}.{name}", f"{kind} {rng}", value, f"set {name} {rng}")
-            )
+            field = label or f"{owner}.{name}"
+            raise ConfigError(expect(field, f"{kind} {rng}", value, f"set {label or name} {rng}"))
 
     def _accepts(self, value: object) -> bool:
         if self.integer:
@@ -175,6 +176,14 @@ def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds], ...]:
     )
     _BOUNDS[cls] = tuple((name, b) for name, b in found if b is not None)
     return _BOUNDS[cls]
+
+
+def check_option_bounds(options: object) -> None:
+    """The ``Annotated`` bounds of the fields of any dataclass instance (a command's options),
+    each error naming the option as ``--name``."""
+    for name, bounds in _bounds_of(type(options)):
+        flag = "--" + name.replace("_", "-")
+        bounds.check(type(options).__name__, name, getattr(options, name), label=flag)
 
 
 def _check_bounds(cfg: Config) -> None:

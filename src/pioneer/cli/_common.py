@@ -14,7 +14,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
 
 import tyro
+from annotated_types import Ge
 
+from pioneer.config import check_option_bounds
 from pioneer.errors import ConfigError, expect
 
 if TYPE_CHECKING:
@@ -28,6 +30,7 @@ __all__ = [
     "OutDir",
     "OutFile",
     "Output",
+    "Seed",
     "Workers",
     "check_outputs",
     "command_line",
@@ -80,7 +83,8 @@ def metavar(name: str) -> Any:
     return tyro.conf.arg(metavar=name)
 
 
-Workers = Annotated[int | None, optional("N", "all cores")]
+Workers = Annotated[int | None, Ge(1), optional("N", "all cores")]
+Seed = Annotated[int, Ge(0)]  # an episode or training seed
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,6 +105,7 @@ def check_outputs(command: object) -> None:
     so an hour's run does not end at a path it cannot write."""
     from pioneer.io import check_regular_target, output_dir_kind
 
+    check_option_bounds(command)
     hints = typing.get_type_hints(type(command), include_extras=True)
     for f in dataclasses.fields(command):  # type: ignore[arg-type]
         marks = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, Output)]

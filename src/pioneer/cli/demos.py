@@ -7,7 +7,7 @@ from typing import Annotated
 
 import tyro
 
-from pioneer.cli._common import OutFile, command_line, default, metavar, optional
+from pioneer.cli._common import OutFile, Seed, command_line, default, metavar, optional
 from pioneer.demos.generate import generate
 from pioneer.demos.teleop import TeleopSession
 from pioneer.io import to_json
@@ -27,7 +27,7 @@ class DemosGenerate:
     """positive samples"""
     negative: Annotated[int | None, optional("N", "the paper's count")] = None
     """negative samples"""
-    seed: int = default(generate, "seed")
+    seed: Seed = default(generate, "seed")
     """seed of the first episode"""
 
     def run(self) -> int:
@@ -65,7 +65,7 @@ class Teleop:
     """dataset .npz (appended to after every episode)"""
     scenario: str = "hr-rl"
     """hr-rl, hl-rr, static, …"""
-    seed: int = default(TeleopSession, "seed")
+    seed: Seed = default(TeleopSession, "seed")
     """episode k is seeded seed + k"""
     max_episodes: Annotated[int | None, optional("N", "until you quit")] = None
     """stop after this many saved episodes"""

@@ -11,6 +11,7 @@ from pioneer.cli._common import (
     Flag,
     OutDir,
     Output,
+    Seed,
     Workers,
     default,
     metavar,
@@ -66,7 +67,7 @@ class Run:
     """hr-rl, hl-rr, static, hr-rl-r03, …"""
     policy: Annotated[str, metavar("POLICY")] = "goal"
     """controller NAME or NAME:key=value,… (e.g. student-mdn:checkpoint=PATH)"""
-    seed: int = 0
+    seed: Seed = 0
     """episode seed"""
     gif: Annotated[str | None, optional("FILE", "none"), Output("file")] = None
     """write an animation of the episode here"""

@@ -15,6 +15,7 @@ from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 from pioneer.cli._common import (
     Flag,
     OutDir,
+    Seed,
     Workers,
     command_line,
     default,
@@ -71,7 +72,7 @@ class Distill:
     """epochs after round 0"""
     epochs_per_round: int = default(DaggerConfig, "epochs_per_round")
     """epochs after later rounds"""
-    seed: int = default(DaggerConfig, "seed")
+    seed: Seed = default(DaggerConfig, "seed")
     """seeds the networks and the DAgger episodes"""
     workers: Workers = None
     """processes collecting episodes"""
@@ -114,7 +115,7 @@ class TrainCrowdNav:
     """total environment steps"""
     envs: int = default(PPOConfig, "n_envs")
     """environments stepped together"""
-    seed: int = default(PPOConfig, "seed")
+    seed: Seed = default(PPOConfig, "seed")
     """seeds the weights, the action noise, the minibatches and the episodes"""
     lr: float = default(PPOConfig, "lr")
     """Adam learning rate"""

@@ -7,7 +7,16 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
-from pioneer.cli._common import OutDir, Output, Workers, default, metavar, optional, require_some
+from pioneer.cli._common import (
+    OutDir,
+    Output,
+    Seed,
+    Workers,
+    default,
+    metavar,
+    optional,
+    require_some,
+)
 from pioneer.experiments.calibration import calibrate
 from pioneer.experiments.reproduce import SCENARIOS
 from pioneer.io import output_dir
@@ -24,7 +33,7 @@ class Scenarios:
 
     png_dir: Annotated[str | None, optional("DIR", "draw none"), Output("folder")] = None
     """write one PNG per scenario (its layout and a start state)"""
-    seed: int = 0
+    seed: Seed = 0
     """seed of the drawn start state"""
 
     def run(self) -> int:
