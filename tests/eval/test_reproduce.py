@@ -51,3 +51,17 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
     before = (smoke / "eval" / "episodes.jsonl").read_text()
     assert main(["reproduce", "--profile", "smoke", "--out", str(smoke), "--workers", "1"]) == 0
     assert (smoke / "eval" / "episodes.jsonl").read_text() == before
+
+
+def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys):
+    from pioneer.experiments.reproduce import PROFILES, _announce, expected_seconds
+
+    rows = ["teacher", "goal"]
+    # 1,000 episodes a row on 2 workers: (1.37 + 0.009) s × 1,000 / 2
+    assert expected_seconds(rows, 1000, 2) == pytest.approx(689.5)
+    assert expected_seconds(rows, 1000, 1) == pytest.approx(2 * 689.5)
+    assert expected_seconds(["unknown"], 10, 1) == pytest.approx(1.0)
+    _announce("paper", PROFILES["paper"], rows, tmp_path, workers=2)
+    line = capsys.readouterr().err.strip()
+    assert line.startswith("pioneer reproduce --profile paper: 2,000 episodes (0 done)")
+    assert "expected ≈ 11 min with 2 worker(s)" in line  # 689.5 s

@@ -27,7 +27,7 @@ from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
 from pioneer.io import output_dir, to_json, write_text_atomic
 
-__all__ = ["PROFILES", "Profile", "reproduce"]
+__all__ = ["EPISODE_S", "PROFILES", "Profile", "expected_seconds", "reproduce"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +49,32 @@ STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: the shipped PPO weights)
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
+
+# Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
+# VM in the paper profile of 2026-11-24 (mean of HR-RL and HL-RR; docs/performance.md). Only
+# for the expected time that `reproduce` reports before it starts; a policy not listed counts
+# 0.1 s.
+EPISODE_S = {
+    "teacher": 1.37,
+    "teacher-no-density": 0.85,
+    "teacher-no-goal": 1.65,
+    "teacher-no-obstacle": 1.29,
+    "cvar-bf": 1.12,
+    "crowdnav++": 0.06,
+    "dwa": 0.07,
+    "sfm": 0.014,
+    "goal": 0.009,
+    "student-mdn": 0.03,
+    "student-mlp": 0.024,
+    "student-shield": 0.046,
+}
+
+
+def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -> float:
+    """The expected wall time [s] of ``episodes_per_row`` episodes of each policy row on
+    ``workers`` cores like the reference VM's (:data:`EPISODE_S`)."""
+    cpu = sum(EPISODE_S.get(row, 0.1) for row in rows) * episodes_per_row
+    return cpu / max(workers, 1)
 
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
@@ -87,6 +113,8 @@ def reproduce(
     students = [PolicySpec.make(name) for name in STUDENTS]
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
     policies += extra + students
+    if progress:
+        _announce(profile, prof, [p.row for p in policies], out, workers)
     records = evaluate(
         SCENARIOS, policies, prof.seeds, prof.trials, out / "eval", workers, progress=progress
     )
@@ -126,6 +154,29 @@ def reproduce(
         "teacher_success_rate": head,
         "elapsed_s": elapsed,
     }
+
+
+def _announce(
+    profile: str, prof: Profile, rows: Sequence[str], out: Path, workers: int | None
+) -> None:
+    """One line before the work: how many episodes, how many are done, the expected time."""
+    import os
+    import sys
+
+    from pioneer.eval.harness import EPISODES_FILE, read_records
+
+    n_workers = workers or os.cpu_count() or 1
+    per_row = len(SCENARIOS) * prof.seeds * prof.trials
+    done = len(read_records(out / "eval" / EPISODES_FILE))
+    total = per_row * len(rows)
+    left = expected_seconds(rows, per_row, n_workers) * (1.0 - done / total)
+    print(
+        f"pioneer reproduce --profile {profile}: {total:,} episodes ({done:,} done), expected "
+        f"≈ {left / 60:.0f} min with {n_workers} worker(s) on a machine like the reference "
+        "2-core VM (docs/performance.md)",
+        file=sys.stderr,
+        flush=True,
+    )
 
 
 def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
