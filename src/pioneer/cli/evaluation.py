@@ -21,6 +21,7 @@ from pioneer.cli._common import (
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+from pioneer.interrupt import kept
 
 if TYPE_CHECKING:
     from pioneer.control.policy import Policy
@@ -201,5 +202,7 @@ class Reproduce:
 
     def run(self) -> int:
         """Reproduce, then print what was written."""
-        print(json.dumps(reproduce(self.profile, self.out, self.workers), indent=2))
+        with kept(lambda: f"the finished steps kept in {self.out}"):  # the harness names its own
+            summary = reproduce(self.profile, self.out, self.workers)
+        print(json.dumps(summary, indent=2))
         return 0
