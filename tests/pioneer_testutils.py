@@ -1,10 +1,18 @@
-"""Helpers shared by the test modules: hand-built states, worlds and reference geometry."""
+"""Helpers shared by the test modules: hand-built states, worlds and reference geometry, and
+a CLI run stopped by a signal."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -13,13 +21,18 @@ from pioneer.sim.humans import WALKING
 from pioneer.sim.world import SimConfig, State, World
 
 __all__ = [
+    "Stopped",
     "angle_diff",
     "assert_house_message",
     "concat_states",
+    "descendants",
+    "interrupted_line",
     "make_state",
     "open_world",
     "room_world",
     "states_equal",
+    "still_running",
+    "stop_cli",
     "wall_distances",
 ]
 
@@ -203,3 +216,110 @@ def heavy():
              "pioneer.control")
     return sorted(m for m in names if m in sys.modules)
 """
+
+
+# ---------------------------------------------------------------------- signals
+@dataclasses.dataclass(frozen=True)
+class Stopped:
+    """A ``pioneer`` run stopped by a signal: its exit code, the seconds from the signal to
+    its exit, its stderr, and the processes it had started that still ran afterwards."""
+
+    returncode: int
+    seconds: float
+    stderr: str
+    left: list[int]
+
+
+def _processes() -> dict[int, tuple[int, str, str]]:
+    """pid → (parent pid, state, start time) of every process (Linux ``/proc``)."""
+    table = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:  # ended meanwhile
+                continue
+            table[int(entry.name)] = (int(fields[1]), fields[0], fields[19])
+    return table
+
+
+def descendants(pid: int) -> dict[int, str]:
+    """The processes below ``pid``, with their start times (to tell a reused pid)."""
+    table = _processes()
+    found: dict[int, str] = {}
+    parents = [pid]
+    while parents:
+        parent = parents.pop()
+        for child, (ppid, _, start) in table.items():
+            if ppid == parent and child not in found:
+                found[child] = start
+                parents.append(child)
+    return found
+
+
+def still_running(procs: dict[int, str]) -> list[int]:
+    """Those of ``procs`` (pid → start time) that still run: a zombie has ended."""
+    table = _processes()
+    return sorted(
+        pid
+        for pid, start in procs.items()
+        if pid in table and table[pid][2] == start and table[pid][1] != "Z"
+    )
+
+
+def stop_cli(
+    argv: Sequence[str],
+    started: Callable[[], bool],
+    signum: int,
+    workdir: Path,
+    group: bool,
+) -> Stopped:
+    """Run ``pioneer ARGV`` in a fresh interpreter and session, wait until ``started()`` (the
+    run has done some work), send ``signum`` — to the whole process group like a terminal's
+    Ctrl-C when ``group``, else to the command alone like ``kill`` — and wait for the exit.
+    Whatever happens, nothing it started is left running after the test."""
+    import pytest
+
+    err_path = workdir / f"stderr-{signal.Signals(signum).name}.txt"
+    with open(err_path, "w") as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pioneer.cli", *argv],
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            start_new_session=True,
+        )
+    procs: dict[int, str] = {}
+    try:
+        deadline = time.monotonic() + 300  # a guard against a hang, not a timing assertion
+        while not started():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"the run ended or hung before any work: {err_path.read_text()}")
+            time.sleep(0.005)
+        procs = descendants(proc.pid)
+        t0 = time.monotonic()
+        if group:
+            os.killpg(proc.pid, signum)
+        else:
+            proc.send_signal(signum)
+        code = proc.wait(timeout=60)
+        seconds = time.monotonic() - t0
+        deadline = time.monotonic() + 2.0
+        while still_running(procs) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return Stopped(code, seconds, err_path.read_text(), still_running(procs))
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        for pid in still_running(procs):
+            os.kill(pid, signal.SIGKILL)
+
+
+def interrupted_line(stderr: str) -> str:
+    """The line an interrupted run printed last; before it only progress bars, no traceback."""
+    lines = [x for x in re.split(r"[\r\n]", stderr) if x.strip()]
+    assert lines, "nothing on stderr"
+    others = [x for x in lines[:-1] if not re.search(r"\d+%\|", x)]  # tqdm: " 12%|█▎  | 1/8"
+    assert others == [], stderr
+    assert lines[-1].startswith("pioneer: interrupted ("), stderr
+    return lines[-1]

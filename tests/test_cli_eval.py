@@ -1,14 +1,17 @@
 """``pioneer run`` with the teacher and ``pioneer eval``: records, labels, resume, one-line
-errors with exit code 2."""
+errors with exit code 2, one line and exit code 143 when a signal stops it."""
 
 from __future__ import annotations
 
 import json
+import shlex
+import signal
 import subprocess
 import sys
 
 import pytest
 
+import pioneer.eval.harness as harness
 from pioneer.cli import main
 from pioneer.control.teacher import make_teacher
 from pioneer.eval.episode import run_episode
@@ -98,6 +101,37 @@ def test_eval_writes_records_and_summary_then_resumes(tmp_path, capsys):
     assert main(_eval_argv(out, "--policy", "goal", "--seeds", "2", "--trials", "2")) == 0
     assert "(4 episodes)" in capsys.readouterr().out
     assert (out / EPISODES_FILE).read_text().splitlines() == lines
+
+
+def test_eval_stopped_by_sigterm_names_the_kept_records_and_the_command(
+    tmp_path, capsys, monkeypatch
+):
+    """In this process (one worker): SIGTERM during the third episode → exit 143, one line,
+    the two finished records kept; the same command completes the set."""
+    real, started = harness.run_task, []
+
+    def signalled_on_the_third(task):
+        started.append(task.key)
+        if len(started) == 3:
+            signal.raise_signal(signal.SIGTERM)
+        return real(task)
+
+    monkeypatch.setattr(harness, "run_task", signalled_on_the_third)
+    out = tmp_path / "ev"
+    argv = _eval_argv(out, "--policy", "goal", "--seeds", "1", "--trials", "4")
+    assert main(argv) == 143
+    path = out / EPISODES_FILE
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"pioneer: interrupted (SIGTERM); 2 of 4 episodes kept in {path}; "
+        f"resume with: {shlex.join(['pioneer', *argv])}"
+    )
+    kept = path.read_text().splitlines()
+    assert len(kept) == 2
+    assert main(argv) == 0
+    lines = path.read_text().splitlines()
+    assert lines[:2] == kept
+    keys = [(r["policy"], r["trial"]) for r in map(json.loads, lines)]
+    assert sorted(keys) == [("goal", t) for t in range(4)]
 
 
 def test_eval_no_density_labels_only_the_teacher(tmp_path, capsys):

@@ -1,10 +1,11 @@
 """Episodes and the evaluation harness (SPEC 7): deterministic episodes and seeds, resumable
-records (after a kill or a torn write), loud failure on a corrupt file, and the same records
-from serial, parallel and Ray runs."""
+records (after a kill, SIGINT, SIGTERM or a torn write), loud failure on a corrupt file, and the
+same records from serial, parallel and Ray runs."""
 
 from __future__ import annotations
 
 import json
+import shlex
 import signal
 import subprocess
 import sys
@@ -28,7 +29,7 @@ from pioneer.eval.harness import (
     read_records,
     run_task,
 )
-from pioneer_testutils import assert_house_message
+from pioneer_testutils import assert_house_message, interrupted_line, stop_cli
 
 TIMING = ("wall_time_s", "decision_ms")
 GOAL = PolicySpec.make("goal")  # in "static" it drives into the person: ~20 steps an episode
@@ -227,6 +228,56 @@ def test_a_killed_run_resumes_with_one_record_per_episode(tmp_path):
     assert set(keys) == _expected_keys(["static"], ["goal"], seeds, trials)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["static/goal"]["episodes"] == seeds * trials
+
+
+# ~3 s an episode (300 steps of a finer window): a signal always finds episodes running
+SLOW_DWA = "dwa:n_v=15,n_omega=41"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("signum", "group"),
+    [(signal.SIGINT, True), (signal.SIGTERM, False)],
+    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
+)
+def test_a_signal_stops_eval_at_once_and_the_rerun_completes_the_set(tmp_path, signum, group):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or ``kill`` (SIGTERM
+    to the command alone) with two workers busy: exit 128 + signal within 2 s, no process
+    left, one line naming what was kept and the command that resumes; the rerun completes the
+    set, each episode once, the kept records untouched."""
+    out = tmp_path / "eval"
+    path = out / EPISODES_FILE
+    trials = 3
+    argv = [
+        "eval", "--scenario", "static", "--policy", SLOW_DWA, "--seeds", "1",
+        "--trials", str(trials), "--workers", "2", "--out", str(out),
+    ]  # fmt: skip
+    stopped = stop_cli(
+        argv, lambda: path.is_file() and b"\n" in path.read_bytes(), signum, tmp_path, group
+    )
+    print(f"{signal.Signals(signum).name}: exit {stopped.returncode} in {stopped.seconds:.2f} s")
+    assert stopped.returncode == 128 + signum
+    assert stopped.seconds < 2.0
+    assert stopped.left == []
+    kept = _lines(path)
+    assert 1 <= len(kept) < trials
+    assert interrupted_line(stopped.stderr) == (
+        f"pioneer: interrupted ({signal.Signals(signum).name}); {len(kept)} of {trials} "
+        f"episodes kept in {path}; resume with: {shlex.join(['pioneer', *argv])}"
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    lines = _lines(path)
+    assert lines[: len(kept)] == kept
+    keys = [_key(json.loads(x)) for x in lines]
+    assert len(keys) == len(set(keys)) == trials
+    assert set(keys) == _expected_keys(["static"], ["dwa"], 1, trials)
 
 
 def test_a_torn_last_line_is_dropped_with_a_warning_and_rerun(tmp_path, capsys):

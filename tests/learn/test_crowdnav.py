@@ -1,14 +1,17 @@
 """CrowdNav++ baseline: graph observation, attention and masking, increments → commands, PPO's
 GAE against a brute-force oracle, the reward terms, checkpoints, determinism, the shipped
-weights in the spawned-process harness, the training command end to end with resume, and the
-imitation warm start (teacher actions in the policy's action space, cloning, resume after it)."""
+weights in the spawned-process harness, the training command end to end with resume (also
+after SIGINT or SIGTERM), and the imitation warm start (teacher actions in the policy's action
+space, cloning, resume after it)."""
 
 from __future__ import annotations
 
 import csv
 import json
 import math
+import shlex
 import shutil
+import signal
 
 import numpy as np
 import pytest
@@ -47,7 +50,13 @@ from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario, sample_state
 from pioneer.sim.world import step
-from pioneer_testutils import assert_house_message, make_state, open_world
+from pioneer_testutils import (
+    assert_house_message,
+    interrupted_line,
+    make_state,
+    open_world,
+    stop_cli,
+)
 
 torch.set_num_threads(1)
 
@@ -334,6 +343,51 @@ def test_train_cli_end_to_end_and_resume(tmp_path, capsys):
         assert torch.equal(v, wb.state_dict()[k]), k
     assert _train(a, 240) == 0  # finished: a rerun changes nothing
     assert json.loads((a / "train.json").read_text())["updates"] == 4
+    capsys.readouterr()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("signum", "group"),
+    [(signal.SIGINT, True), (signal.SIGTERM, False)],
+    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
+)
+def test_a_signal_stops_training_between_updates_and_the_rerun_matches(
+    tmp_path, capsys, signum, group
+):
+    """Stopped mid-run: exit 128 + signal within 2 s, no process left, every finished update
+    kept (not only those of the last periodic checkpoint) and named in the one line; the
+    rerun continues from there and ends as the uninterrupted run."""
+    a, b = tmp_path / "a", tmp_path / "b"
+
+    def argv_to(out):  # 30 updates of ~0.15 s
+        return [
+            "train", "crowdnav++", "--scenario", "hr-rl", "--out", str(out), "--steps", "1800",
+            "--envs", "2", "--checkpoint-every", "4",
+        ]  # fmt: skip
+
+    argv = argv_to(a)
+    ckpt = a / "checkpoint.safetensors"
+    stopped = stop_cli(argv, ckpt.is_file, signum, tmp_path, group)
+    name = signal.Signals(signum).name
+    with capsys.disabled():
+        print(f"{name}: exit {stopped.returncode} in {stopped.seconds:.2f} s")
+    assert stopped.returncode == 128 + signum
+    assert stopped.seconds < 2.0
+    assert stopped.left == []
+    updates = len(_curve(a))
+    assert 4 <= updates < 30
+    assert interrupted_line(stopped.stderr) == (
+        f"pioneer: interrupted ({name}); update {updates} of 30 kept in "
+        f"{ckpt}; resume with: {shlex.join(['pioneer', *argv])}"
+    )
+    assert main(argv) == 0  # resumed
+    assert json.loads((a / "train.json").read_text())["resumed_from_update"] == updates
+    assert main(argv_to(b)) == 0  # uninterrupted
+    assert _curve(a) == _curve(b)
+    wa, wb = load_crowdnav(a / "policy.safetensors"), load_crowdnav(b / "policy.safetensors")
+    for k, v in wa.state_dict().items():
+        assert torch.equal(v, wb.state_dict()[k]), k
     capsys.readouterr()
 
 

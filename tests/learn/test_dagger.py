@@ -1,5 +1,6 @@
 """DAgger (``pioneer.learn.dagger``) and ``pioneer distill``: outputs, labels, seeds,
-determinism across runs and worker counts, resume, refused reruns, bad settings.
+determinism across runs and worker counts, resume (also after SIGINT or SIGTERM), refused
+reruns, bad settings.
 
 The runs use a test-only scenario, ``tiny-static``: the static study truncated after 0.8 s
 (8 decisions an episode), so a whole DAgger run takes a few seconds. Spawned collection
@@ -12,7 +13,11 @@ import csv
 import dataclasses
 import json
 import math
+import shlex
 import shutil
+import signal
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -33,7 +38,7 @@ from pioneer.learn.dagger import DaggerConfig, DaggerResult, dagger_seed, run_da
 from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
 from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.world import SimConfig
-from pioneer_testutils import assert_house_message
+from pioneer_testutils import assert_house_message, interrupted_line, stop_cli
 
 torch.set_num_threads(1)
 
@@ -428,6 +433,62 @@ def test_cli_distill_repeats_the_run_and_resumes(run_mdn, reward_file, tmp_path,
     _assert_same_episodes(res.out, out)
     _assert_same_weights(res.student, again.student)
     _assert_same_weights(res.student, out / "rounds/round-02/student.safetensors")
+
+
+def _static_argv(out: Path, reward: Path, workers: int) -> list[str]:
+    """A short DAgger run on the static study (~0.5 s an episode), in a fresh interpreter."""
+    return [
+        "distill", "--scenario", "static", "--teacher-episodes", "4", "--rounds", "1",
+        "--episodes-per-round", "2", "--epochs-initial", "2", "--epochs-per-round", "1",
+        "--reward", str(reward), "--workers", str(workers), "--out", str(out),
+    ]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def static_run(tmp_path_factory: pytest.TempPathFactory, reward_file: Path) -> Path:
+    """That run uninterrupted (in this process, one worker: the same episodes and weights)."""
+    out = tmp_path_factory.mktemp("dagger") / "static"
+    assert main(_static_argv(out, reward_file, 1)) == 0
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("signum", "group"),
+    [(signal.SIGINT, True), (signal.SIGTERM, False)],
+    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
+)
+def test_a_signal_stops_distill_at_once_and_the_rerun_ends_bit_for_bit(
+    tmp_path, reward_file, static_run, signum, group
+):
+    """Stopped while two workers collect: exit 128 + signal within 2 s, no process left, one
+    line with what was kept and the command; the rerun ends with the uninterrupted run's
+    episodes and student, bit for bit."""
+    out = tmp_path / "run"
+    argv = _static_argv(out, reward_file, 2)
+    first = out / "rounds" / "round-00"
+    stopped = stop_cli(argv, lambda: any(first.glob("ep-*.npz")), signum, tmp_path, group)
+    print(f"{signal.Signals(signum).name}: exit {stopped.returncode} in {stopped.seconds:.2f} s")
+    assert stopped.returncode == 128 + signum
+    assert stopped.seconds < 2.0
+    assert stopped.left == []
+    episodes = len(list((out / "rounds").glob("round-*/ep-*.npz")))
+    students = len(list((out / "rounds").glob("round-*/student.safetensors")))
+    assert 1 <= episodes < 6
+    assert interrupted_line(stopped.stderr) == (
+        f"pioneer: interrupted ({signal.Signals(signum).name}); {episodes} of 6 episodes and "
+        f"{students} of 2 rounds kept in {out}; resume with: {shlex.join(['pioneer', *argv])}"
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    _assert_same_episodes(static_run, out)
+    _assert_same_weights(static_run / "student.safetensors", out / "student.safetensors")
 
 
 def test_a_recreated_run_folder_drives_with_its_own_students(tmp_path, reward_file):

@@ -23,6 +23,7 @@ from pioneer.cli._common import (
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+from pioneer.interrupt import kept
 from pioneer.io import to_json
 
 if TYPE_CHECKING:
@@ -233,5 +234,7 @@ class Reproduce:
 
     def run(self) -> int:
         """Reproduce, then print what was written."""
-        print(to_json(reproduce(self.profile, self.out, self.workers), indent=2))
+        with kept(lambda: f"the finished steps kept in {self.out}"):  # the harness names its own
+            summary = reproduce(self.profile, self.out, self.workers)
+        print(to_json(summary, indent=2))
         return 0

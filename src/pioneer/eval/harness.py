@@ -4,11 +4,14 @@ Every episode is identified by (scenario, policy label, seed, trial); its enviro
 derived deterministically from (scenario, seed, trial), so any episode can be replayed alone
 (`episode_seed`) and every policy meets the same initial states. Finished episodes are
 appended to ``episodes.jsonl`` by the parent process as they arrive (one JSON object a line,
-flushed and fsynced), so an interrupted run resumes where it stopped; a malformed line is
-reported with its line number, never skipped. Backends: local processes (default) or a Ray
-cluster (extra ``distributed``). ``scenarios.json`` records the full config of every scenario
-evaluated into the folder; resuming with a scenario whose definition changed under the same
-name (an edited scenario file) is refused, so one table never mixes two layouts.
+flushed and fsynced, each written whole even when a signal arrives), so an interrupted run
+resumes where it stopped; a malformed line is reported with its line number, never skipped.
+On SIGINT or SIGTERM (:mod:`pioneer.interrupt`) the workers are killed at once, the running
+episodes are lost (a resumed run repeats them) and the run names what it kept. Backends:
+local processes (default) or a Ray cluster (extra ``distributed``). ``scenarios.json``
+records the full config of every scenario evaluated into the folder; resuming with a
+scenario whose definition changed under the same name (an edited scenario file) is refused,
+so one table never mixes two layouts.
 """
 
 from __future__ import annotations
@@ -17,14 +20,17 @@ import contextlib
 import dataclasses
 import json
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.interrupt import deferred, kept
 from pioneer.io import check_regular_target, naming_path, output_dir, to_json
 from pioneer.seeds import evaluation_seed
 
@@ -275,7 +281,7 @@ def _pairs(tasks: list[Task]) -> list[tuple[str, PolicySpec]]:
 # A stream first yields None once every policy of the run is built (a policy that cannot be
 # built fails the run before any episode, and before the records file is opened), then the
 # records as the episodes finish.
-def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any] | None]:
+def _local(tasks: list[Task], workers: int) -> Generator[dict[str, Any] | None, None, None]:
     if workers <= 1:
         for pair in _pairs(tasks):
             build_check(pair)
@@ -291,7 +297,7 @@ def _local(tasks: list[Task], workers: int) -> Iterator[dict[str, Any] | None]:
         yield from bounded_map(pool, run_task, tasks, 4 * workers)
 
 
-def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any] | None]:
+def _ray(tasks: list[Task], address: str | None) -> Generator[dict[str, Any] | None, None, None]:
     try:
         import ray
     except ImportError as exc:
@@ -303,23 +309,41 @@ def _ray(tasks: list[Task], address: str | None) -> Iterator[dict[str, Any] | No
                 "pip install 'pioneer-nav[distributed]'",
             )
         ) from exc
-    if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    started = not ray.is_initialized()
+    if started:
+        _ray_init(ray, address)
     from pioneer.sim.scenarios import SCENARIOS_ENV
 
     files = os.environ.get(SCENARIOS_ENV)  # scenario files: the same paths on every node
-    remote = (
-        ray.remote(runtime_env={"env_vars": {SCENARIOS_ENV: files}})(run_task)
-        if files
-        else ray.remote(run_task)
-    )
-    build = ray.remote(build_check)
-    ray.get([build.remote(pair) for pair in _pairs(tasks)])
-    yield None
-    refs = [remote.remote(t) for t in tasks]
-    while refs:
-        done, refs = ray.wait(refs, num_returns=1)
-        yield ray.get(done[0])
+    remote: Any = ray.remote(run_task)
+    build: Any = ray.remote(build_check)
+    if files:
+        env = {"env_vars": {SCENARIOS_ENV: files}}
+        remote, build = (ray.remote(runtime_env=env)(f) for f in (run_task, build_check))
+    refs: list[Any] = []
+    try:
+        ray.get([build.remote(pair) for pair in _pairs(tasks)])
+        yield None
+        refs = [remote.remote(t) for t in tasks]
+        while refs:
+            done, refs = ray.wait(refs, num_returns=1)
+            yield ray.get(done[0])
+    except BaseException:  # interrupted or abandoned: stop the tasks, and the Ray we started
+        for ref in refs:
+            ray.cancel(ref, force=True)
+        if started:
+            ray.shutdown()
+        raise
+
+
+def _ray_init(ray: Any, address: str | None) -> None:
+    """``ray.init``, keeping this process's SIGTERM handler (Ray sets its own, which exits
+    without the interruption's line)."""
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.getsignal(signal.SIGTERM) if main else None
+    ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    if handler is not None:
+        signal.signal(signal.SIGTERM, handler)
 
 
 def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
@@ -386,18 +410,23 @@ def evaluate(
     n_workers = workers or os.cpu_count() or 1
     stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
     total = len(done) + len(todo)
-    next(stream)  # every policy built before the first episode and the records file
     with (
-        open(check_regular_target(path), "a") as fh,
-        tqdm(
-            total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
-        ) as bar,
+        kept(lambda: f"{len(records)} of {total} episodes kept in {path}"),
+        contextlib.closing(stream),  # its pool stops with the run, whatever stops the run
     ):
-        for rec in stream:
-            assert rec is not None
-            _append(fh, rec)
-            records.append(rec)
-            if on_record is not None:
-                on_record(rec)
-            bar.update(1)
+        next(stream)  # every policy built before the first episode and the records file
+        with (
+            open(check_regular_target(path), "a") as fh,
+            tqdm(
+                total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
+            ) as bar,
+        ):
+            for rec in stream:
+                assert rec is not None
+                with deferred():  # a record is written whole and counted
+                    _append(fh, rec)
+                    records.append(rec)
+                if on_record is not None:
+                    on_record(rec)
+                bar.update(1)
     return records

@@ -49,6 +49,7 @@ from tqdm import tqdm
 from pioneer.config import Config
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
+from pioneer.interrupt import kept
 from pioneer.io import atomic_path, load_npz, output_dir, to_json, write_text_atomic
 from pioneer.learn.models import (
     MDN,
@@ -121,6 +122,11 @@ class DaggerConfig(Config):
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
         return self.teacher_episodes if rnd == 0 else self.episodes_per_round
+
+    @property
+    def total_episodes(self) -> int:
+        """Episodes of the whole run."""
+        return self.teacher_episodes + self.rounds * self.episodes_per_round
 
 
 @dataclasses.dataclass(frozen=True)
@@ -329,6 +335,20 @@ def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
     plot_dagger_curves(rows, out / "curves.png")
 
 
+def _on_disk(cfg: DaggerConfig, out: Path) -> tuple[int, int]:
+    """The run's episodes and rounds' students already written to ``out``."""
+    rounds = range(cfg.rounds + 1)
+    eps = sum(_episode_path(out, r, i).exists() for r in rounds for i in range(cfg.episodes_in(r)))
+    return eps, sum((_round_dir(out, r) / FINAL_FILE).exists() for r in rounds)
+
+
+def _kept(cfg: DaggerConfig, out: Path) -> str:
+    """What an interrupted run keeps (:func:`pioneer.interrupt.kept`)."""
+    episodes, students = _on_disk(cfg, out)
+    total, rounds = cfg.total_episodes, cfg.rounds + 1
+    return f"{episodes} of {total} episodes and {students} of {rounds} rounds kept in {out}"
+
+
 def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> Path:
     """Check ``out`` against ``cfg`` (resume) and return the teacher's reward file."""
     from pioneer.sim.scenarios import get_scenario
@@ -427,18 +447,14 @@ def run_dagger(
     # depend on --workers or the machine (the networks are small; threads gain little).
     torch.set_num_threads(1)
     _CACHE.clear()
-    total = cfg.teacher_episodes + cfg.rounds * cfg.episodes_per_round
-    done = sum(
-        _episode_path(out, r, i).exists()
-        for r in range(cfg.rounds + 1)
-        for i in range(cfg.episodes_in(r))
-    )
+    total = cfg.total_episodes
+    done, _ = _on_disk(cfg, out)
     curves: list[dict[str, Any]] = []
     agg_obs: list[NDArray[np.float32]] = []
     agg_act: list[NDArray[np.float32]] = []
     model: Student | None = None
     bar = tqdm(total=total, initial=done, desc="DAgger episodes", unit="ep", disable=not progress)
-    with bar, _pool(n_workers) as pool:
+    with kept(lambda: _kept(cfg, out)), bar, _pool(n_workers) as pool:
         for rnd in range(cfg.rounds + 1):
             bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
             for _ in _run_parallel(_round_tasks(cfg, out, reward_path, rnd), pool, n_workers):

@@ -75,6 +75,7 @@ from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.errors import ConfigError, expect
+from pioneer.interrupt import Interrupted, deferred, kept
 from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
@@ -144,24 +145,47 @@ def _train_loop(
     t_start, s_start = time.perf_counter(), tr.env_steps
     try:
         while tr.update < ppo.updates:
-            t0 = time.perf_counter()
-            batch = tr.rollout()
-            stats = tr.learn(batch)
-            tr.update += 1
-            tr.wall += time.perf_counter() - t0
-            row = tr.record()
-            rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
-            bar.update(ppo.steps_per_update)
-            bar.set_postfix(
-                {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
-                refresh=False,
-            )
-            if on_update is not None:
-                on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
-            if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
-                _write_outputs(tr, out, info(), final=False)
+            with deferred():  # a signal stops the run between two updates, never inside one
+                t0 = time.perf_counter()
+                batch = tr.rollout()
+                stats = tr.learn(batch)
+                tr.update += 1
+                tr.wall += time.perf_counter() - t0
+                row = tr.record()
+                rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
+                bar.update(ppo.steps_per_update)
+                bar.set_postfix(
+                    {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
+                    refresh=False,
+                )
+                if on_update is not None:
+                    on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
+                if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
+                    _write_outputs(tr, out, info(), final=False)
     finally:
         bar.close()
+
+
+def _imitation(tr: _Trainer, out: Path, fresh: bool, progress: bool) -> dict[str, Any] | None:
+    """With ``--bc-episodes``: the imitation phase's summary, and for a ``fresh`` run (no
+    checkpoint yet) its result loaded into ``tr`` and saved as the first checkpoint (the
+    phase itself reuses what is in ``out``)."""
+    if not tr.warm.bc_episodes:
+        return None
+    from pioneer.baselines.crowdnav.imitation import POLICY_FILE, warm_start
+    from pioneer.baselines.crowdnav.network import read_crowdnav_meta
+
+    if fresh:
+        with kept(lambda: f"the finished imitation rounds kept in {out / 'bc_data.npz'}"):
+            model, info = warm_start(
+                tr.scenario, tr.net_cfg, tr.warm, tr.ppo.seed, out, progress=progress
+            )
+        tr.model.load_state_dict(model.state_dict(), strict=True)
+        tr.save(out / "checkpoint.safetensors")
+        return info
+    if (out / POLICY_FILE).is_file():
+        return dict(read_crowdnav_meta(out / POLICY_FILE)["info"])
+    return None
 
 
 def train_crowdnav(
@@ -194,23 +218,11 @@ def train_crowdnav(
     warm = warm or WarmStartConfig()
     tr = _Trainer(sc, ppo, net, reward or CrowdNavRewardConfig(), warm)
     resumed_from = None
-    bc_info: dict[str, Any] | None = None
     if ckpt.is_file():
         tr.load(ckpt)
         resumed_from = tr.update
     output_dir(out)
-    if warm.bc_episodes:
-        # Imitation first (reused from out/ when done); the checkpoint then holds its result.
-        from pioneer.baselines.crowdnav.imitation import warm_start
-
-        if resumed_from is None:
-            bc_model, bc_info = warm_start(sc, net, warm, ppo.seed, out, progress=progress)
-            tr.model.load_state_dict(bc_model.state_dict(), strict=True)
-            tr.save(ckpt)
-        elif (out / "bc_policy.safetensors").is_file():
-            from pioneer.baselines.crowdnav.network import read_crowdnav_meta
-
-            bc_info = read_crowdnav_meta(out / "bc_policy.safetensors")["info"]
+    bc_info = _imitation(tr, out, resumed_from is None, progress)
 
     def info() -> dict[str, Any]:
         last = tr.curve[-1] if tr.curve else [math.nan] * len(CURVE_COLUMNS)
@@ -234,10 +246,15 @@ def train_crowdnav(
         }
 
     t_start, s_start = time.perf_counter(), tr.env_steps
-    _train_loop(tr, out, info, progress, on_update)
-    summary = info()
-    summary["steps_per_s_this_run"] = (tr.env_steps - s_start) / max(
-        time.perf_counter() - t_start, 1e-9
-    )
-    _write_outputs(tr, out, summary, final=True)
+    try:
+        _train_loop(tr, out, info, progress, on_update)
+        summary = info()
+        summary["steps_per_s_this_run"] = (tr.env_steps - s_start) / max(
+            time.perf_counter() - t_start, 1e-9
+        )
+        _write_outputs(tr, out, summary, final=True)
+    except Interrupted as exc:  # between two updates (they run deferred): keep every one
+        _write_outputs(tr, out, info(), final=False)
+        exc.kept = f"update {tr.update} of {ppo.updates} kept in {ckpt}"
+        raise
     return summary
