@@ -3,6 +3,7 @@ deferred block, ignored once stopping, and the one line naming what was kept."""
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 
@@ -85,3 +86,13 @@ def test_outside_the_main_thread_the_handlers_stay():
     thread.start()
     thread.join()
     assert seen == [before]
+
+
+def test_a_signal_held_when_the_block_failed_does_not_leak_into_later_blocks():
+    """A signal arrives inside a deferred() block that then raises its own error: the error
+    wins, and once the run is over no later deferred() block raises the held signal."""
+    with pytest.raises(RuntimeError, match="own"), handle_signals(), deferred():
+        os.kill(os.getpid(), signal.SIGINT)
+        raise RuntimeError("own")
+    with deferred():  # outside a run: nothing pending, nothing raised
+        pass

@@ -57,6 +57,7 @@ class Interrupted(BaseException):
 _depth = 0  # open deferred() blocks
 _pending: int | None = None  # a signal received inside one
 _stopping = False  # Interrupted was raised: ignore further signals
+_active = False  # inside handle_signals(): our handlers are installed
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
@@ -75,12 +76,12 @@ def handle_signals() -> Iterator[None]:
     """SIGINT and SIGTERM raise :class:`Interrupted` inside the block; the previous handlers
     are restored after it. Outside the main thread (where Python cannot set handlers) the
     block runs unchanged."""
-    global _pending, _stopping
+    global _pending, _stopping, _active
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in SIGNALS}
-    _pending, _stopping = None, False
+    _pending, _stopping, _active = None, False, True
     for s in SIGNALS:
         signal.signal(s, _handler)
     try:
@@ -88,6 +89,9 @@ def handle_signals() -> Iterator[None]:
     finally:
         for s, h in previous.items():
             signal.signal(s, signal.SIG_DFL if h is None else h)
+        # A signal held by a deferred() block whose own exception won dies with the block
+        # that handled it; it must not surface in a later, unrelated deferred() block.
+        _pending, _stopping, _active = None, False, False
 
 
 @contextlib.contextmanager
@@ -101,7 +105,7 @@ def deferred() -> Iterator[None]:
         yield
     finally:
         _depth -= 1
-    if not _depth and _pending is not None:
+    if not _depth and _pending is not None and _active:
         signum, _pending, _stopping = _pending, None, True
         raise Interrupted(signum)
 
