@@ -223,3 +223,20 @@ def test_option_bounds_are_checked_before_any_work(args, needle, tmp_path, capsy
     code = main([str(out) if w == "OUT" else w for w in args.split()])
     _one_error_line(capsys, code, needle, "fix:")
     assert not out.exists()
+
+
+def test_partial_writes_of_a_killed_process_are_removed(tmp_path):
+    from pioneer.io import atomic_path, remove_partial_writes
+
+    keep = tmp_path / "r" / "ep-001.npz"
+    keep.parent.mkdir()
+    keep.write_bytes(b"whole")
+    (tmp_path / "r" / ".hidden-user-file").write_text("mine")
+    with pytest.raises(RuntimeError), atomic_path(tmp_path / "r" / "ep-002.npz") as tmp:
+        stray = tmp.with_name(tmp.name)  # what a SIGKILL would leave: the temporary file
+        tmp.write_bytes(b"half")
+        os.link(tmp, stray.with_name(stray.name.replace("ep-002", "ep-003")))
+        raise RuntimeError("killed")
+    assert remove_partial_writes(tmp_path) == 1
+    assert sorted(p.name for p in (tmp_path / "r").iterdir()) == [".hidden-user-file", "ep-001.npz"]
+    assert remove_partial_writes(tmp_path / "missing") == 0

@@ -6,6 +6,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import stat
 import tempfile
 import zipfile
@@ -25,6 +26,7 @@ __all__ = [
     "naming_path",
     "output_dir",
     "output_dir_kind",
+    "remove_partial_writes",
     "to_json",
     "write_text_atomic",
 ]
@@ -170,3 +172,20 @@ def to_json(obj: Any, **kwargs: Any) -> str:
     """``json.dumps`` for everything PioneeR writes or prints: strict JSON, so a NaN or an
     infinity (an undefined mean, an AUROC without negatives) is written as ``null``."""
     return json.dumps(_finite(obj), allow_nan=False, **kwargs)
+
+
+# atomic_path's temporary file: "." + the target's name + "." + mkstemp's 8 characters + suffix
+_PARTIAL = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]{8}(?P<suffix>\.[^.]*)?$")
+
+
+def remove_partial_writes(folder: str | os.PathLike[str]) -> int:
+    """Delete the temporary files that :func:`atomic_path` leaves below ``folder`` when its
+    process is killed mid-write (a resumed run never reads them); returns how many. A missing
+    folder has none."""
+    removed = 0
+    for p in Path(folder).rglob(".*"):
+        m = _PARTIAL.match(p.name)
+        if m and p.is_file() and m["name"].endswith(m["suffix"] or ""):
+            p.unlink()
+            removed += 1
+    return removed

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative, Positive
 from pioneer.errors import ConfigError, expect
+from pioneer.limits import OMEGA_MAX, V_MAX
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
 
@@ -34,8 +35,8 @@ class GoalPolicy:
 
     def __init__(
         self,
-        v_max: Positive = 0.8,
-        omega_max: Positive = 0.4 * math.pi,
+        v_max: Positive = V_MAX,
+        omega_max: Positive = OMEGA_MAX,
         k_omega: Positive = 1.5,
         slow_distance: NonNegative = 0.5,
     ) -> None:

@@ -5,8 +5,8 @@ Round 0 collects ``teacher_episodes`` episodes driven by the teacher; each of th
 teacher labels every state the student visits (Ross et al., AISTATS 2011, with β = 0 after
 round 0). All labelled frames are aggregated and the student is retrained after every round.
 
-Labels are the teacher's smoothed command u_t = α u* + (1 − α) u_{t−1} with u_{t−1} the command
-actually applied (so a frame's label is what the teacher would send had it been driving).
+Labels are the teacher's smoothed command u_t = α u* + (1 − α) u_{t−1}, u_{t−1} the command
+applied (a frame's label is what the teacher would send had it been driving).
 
 Output directory (everything written atomically; a rerun of the same command resumes)::
 
@@ -21,9 +21,8 @@ Output directory (everything written atomically; a rerun of the same command res
 Episode seeds come from their own seed sequence (``"dagger"``, scenario, seed, round,
 episode), disjoint from the evaluation seeds of :func:`pioneer.eval.harness.episode_seed`.
 
-Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds
-continue from the previous round's weights for ``epochs_per_round`` epochs over the whole
-aggregate (warm start — a documented shortcut that keeps a full run within minutes).
+Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds go on
+from the previous weights for ``epochs_per_round`` epochs over the whole aggregate (warm start).
 """
 
 from __future__ import annotations
@@ -351,10 +350,11 @@ def _kept(cfg: DaggerConfig, out: Path) -> str:
 
 def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> Path:
     """Check ``out`` against ``cfg`` (resume) and return the teacher's reward file."""
+    from pioneer.io import remove_partial_writes
     from pioneer.sim.scenarios import get_scenario
 
     get_scenario(cfg.scenario)  # fail early on an unknown scenario
-    output_dir(out)
+    remove_partial_writes(output_dir(out) / "rounds")  # a killed worker's half-written episode
     _check_config(out, cfg)
     _check_scenario(out, cfg.scenario)
     reward_path = Path(reward) if reward is not None else out / "reward.npz"
