@@ -12,8 +12,17 @@ spare, from an exact LP (SciPy's HiGHS) in (u, ζ, η, t) — a level is feasibl
 The test replays each episode with the *stored* commands (so the states, and with them the
 policy's own sample draws, are those of the reference even if one command differed) and
 compares the policy's decision at every state: the same β index, fast-path and fallback flags,
-and the command to ``COMMAND_ATOL``. After an *intended* change of CVaR-BF's behaviour,
-regenerate and say why in the commit::
+and the command to ``COMMAND_ATOL``. It also checks the choice against the margins: the chosen
+level is feasible and every lower one is not, up to ``NEAR`` (the solver's accepted violation,
+``CvarBfConfig.feasibility_tol``): a level whose margin lies within ±``NEAR`` may go either way
+(in the reference: 1 of 966 decisions, a margin of −6·10⁻⁷ m² accepted).
+
+History: the first reference (the lifted QP solved by OSQP, levels tried in order) chose a
+larger β than the first feasible level in 422 of 1,001 decisions, and fell back 4 times with
+a level feasible: its ADMM solves stopped at the iteration limit on levels with margins up to
+0.18 m². This one is of the exact solver (``solver="exact"``, cutting planes).
+
+After an *intended* change of CVaR-BF's behaviour, regenerate and say why in the commit::
 
     .venv/bin/python tests/control/test_cvar_bf_regression.py --regenerate
 """
@@ -43,6 +52,7 @@ SCENARIOS = ("hr-rl", "hl-rr", "hr-rl-compact")
 SEEDS = (0, 1, 2)
 N_STEPS = 120  # decisions per episode at most (12 s of 0.1 s steps)
 COMMAND_ATOL = 0.0  # [m/s, rad/s] the stored command, bit for bit
+NEAR = 1e-5  # [m²] margins within ±NEAR of 0: either decision is right
 
 
 def _policy(name: str) -> CvarBfPolicy:
@@ -151,6 +161,20 @@ def test_cvar_bf_decisions_match_reference(reference, name, seed):
     np.testing.assert_array_equal(now["fallback"], ref["fallback"])
     np.testing.assert_array_equal(now["fast_path"], ref["fast_path"])
     np.testing.assert_allclose(now["command"], ref["command"], rtol=0.0, atol=COMMAND_ATOL)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_the_first_feasible_level_is_chosen(reference, name, seed):
+    """Against the exact LP margins: the chosen level is feasible and no lower level is
+    (each up to ``NEAR``); at a fallback no level is."""
+    margins = reference[f"{name}/{seed}/margin"]
+    index = reference[f"{name}/{seed}/beta_index"]
+    for k, (m, i) in enumerate(zip(margins, index, strict=True)):
+        if i >= 0:
+            assert m[i] >= -NEAR, f"{name}/{seed} step {k}: level {i} infeasible, margin {m[i]}"
+        below = m[: i if i >= 0 else len(m)]
+        assert np.all(below < NEAR), f"{name}/{seed} step {k}: a lower level is feasible: {below}"
 
 
 def test_reference_is_informative(reference):
