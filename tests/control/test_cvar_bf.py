@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -27,6 +28,7 @@ from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
 from pioneer.sim.humans import ARRIVED
+from pioneer.sim.world import State, World
 
 GAMMA = 0.1
 
@@ -203,22 +205,66 @@ def test_barrier_condition_holds_at_the_true_next_state() -> None:
     assert min(wall_gap) >= -0.01  # d² is convex: its linearisation is conservative
 
 
-def test_beta_selection_keeps_the_first_feasible_level() -> None:
-    calls: list[float] = []
+def test_beta_selection_finds_the_first_feasible_level_by_bisection() -> None:
+    """For every split of the levels into infeasible then feasible ones, the first feasible
+    level (its own result), in at most 2 + ⌈log₂ 13⌉ = 6 solves; none feasible: 2 solves."""
+    for first in range(len(BETAS) + 1):
+        calls: list[float] = []
 
-    def solve(beta: float) -> QPResult:
-        calls.append(beta)
-        ok = beta >= 0.3 - 1e-9
-        return QPResult(ok, np.array([beta, 0.0]), np.zeros(2), 0.0, True, "mock")
+        def solve(beta: float, first: int = first, calls: list[float] = calls) -> QPResult:
+            calls.append(beta)
+            ok = BETAS.index(beta) >= first
+            return QPResult(ok, np.array([beta, 0.0]), np.zeros(2), 0.0, True, "mock")
 
-    i, res, n_failed = select_beta(solve, BETAS)
-    assert i == 5 and BETAS[i] == pytest.approx(0.3) and n_failed == 5
-    assert res is not None and res.u[0] == pytest.approx(0.3)
-    assert calls == list(BETAS[:6])  # stops at the first feasible level
-    i, res, n_failed = select_beta(
-        lambda b: QPResult(False, np.zeros(2), np.zeros(2), 1, True, ""), BETAS
-    )
-    assert (i, res, n_failed) == (-1, None, len(BETAS))
+        i, res, n_failed = select_beta(solve, BETAS)
+        if first == len(BETAS):
+            assert (i, res, n_failed) == (-1, None, len(BETAS)) and len(calls) == 2
+            continue
+        assert i == first and n_failed == first and res is not None
+        assert res.u[0] == BETAS[first]  # the result of the chosen level's own solve
+        assert len(calls) == len(set(calls)) <= 6 and calls[0] == BETAS[0]
+
+
+def test_feasibility_grows_with_beta(rng: np.random.Generator) -> None:
+    """Property behind the bisection, on random crowd states and on the states of an episode
+    (where most decisions need a larger β than the first): every level solved on its own, a
+    feasible level is never followed by an infeasible one (a near-tie within the feasibility
+    tolerance would be allowed: the exact LP margin there is ≈ 0), and the bisection finds
+    the first feasible level."""
+    from test_cvar_bf_regression import margin
+
+    def check(pol: CvarBfPolicy, world: World, state: State) -> bool:
+        lin, _ = pol.linearise(world, state)
+        ok = np.array([pol.solve(world, lin, b).ok for b in BETAS])
+        for k in np.flatnonzero(ok[:-1] & ~ok[1:]):
+            assert margin(pol, world, lin, BETAS[k + 1]) >= -pol.config.feasibility_tol
+        i, _, _ = select_beta(lambda b: pol.solve(world, lin, b), BETAS)
+        assert i == (int(np.argmax(ok)) if ok.any() else -1)
+        return bool(ok.any() and not ok.all())
+
+    room, pol = tu.room_world(3.0, 1.5), _policy()
+    for _ in range(40):
+        humans = [
+            {
+                "pos": tuple(rng.uniform([0.0, -1.2], [1.5, 1.2]).tolist()),
+                "vel": tuple(rng.uniform(-1.0, 1.0, 2).tolist()),
+            }
+            for _ in range(int(rng.integers(1, 4)))
+        ]
+        pose = (-1.0, float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1)))
+        state = tu.make_state(robot=pose, goal=(2.8, 0.0), humans=humans)
+        last = [[float(rng.uniform(0, 0.6)), float(rng.uniform(-0.5, 0.5))]]
+        check(pol, room, dataclasses.replace(state, command=np.array(last)))
+    env = NavEnv("hr-rl-compact")
+    obs, info = env.reset(seed=7)
+    driver = _policy(seed=7)
+    mixed = 0
+    for _ in range(60):
+        mixed += check(_policy(seed=int(rng.integers(1000))), env.world, info["state"])
+        obs, _, term, trunc, info = env.step(driver.act(obs, info))
+        if term or trunc:
+            break
+    assert mixed >= 8  # 11 measured
 
 
 def test_adaptive_beta_in_an_episode_matches_solving_every_level() -> None:
@@ -257,7 +303,7 @@ def test_no_feasible_level_falls_back_and_is_counted() -> None:
     d = pol.decide(world, state)
     assert d.fallback and d.beta_index == -1 and math.isnan(d.beta)
     assert d.command[0] == 0.0 and abs(d.command[1]) <= pol.config.fallback_omega
-    assert d.n_infeasible == len(BETAS)
+    assert d.n_infeasible == len(BETAS) and d.n_solver_calls >= 2  # levels 0.05 and 0.70 tried
     assert pol.n_fallback == 1 and pol.n_infeasible == len(BETAS)
     assert math.isnan(pol.betas[-1]) and len(pol.solve_times) == 1
 

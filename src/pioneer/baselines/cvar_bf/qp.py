@@ -34,15 +34,34 @@ class QPResult:
 def select_beta(
     solve: Callable[[float], QPResult], betas: Sequence[float]
 ) -> tuple[int, QPResult | None, int]:
-    """Adaptive risk: try ``betas`` in order, keep the first feasible solve.
+    """Adaptive risk: the first feasible level of ``betas`` (increasing), found by bisection.
 
-    Returns ``(index, result, n_failed)``; ``(-1, None, len(betas))`` when no level is feasible.
+    Feasibility grows with β (a point feasible at β is feasible at every β' > β: the CVaR
+    row's η terms, η ≥ 0, shrink by β/β'), so the levels split into infeasible ones followed
+    by feasible ones. The most conservative level is tried first (the usual answer), then the
+    least (if it fails, none is feasible), then the gap between the last infeasible and the
+    first feasible level found is halved: at most 2 + ⌈log₂(len − 1)⌉ solves, against up to
+    ``len`` in order; the same level as in order as long as the solves' verdicts are monotone
+    (near-ties within the feasibility tolerance may break either way).
+
+    Returns ``(index, result, n_failed)``, n_failed = index (the levels below it are
+    infeasible); ``(-1, None, len(betas))`` when no level is feasible.
     """
-    for i, beta in enumerate(betas):
-        res = solve(beta)
-        if res.ok:
-            return i, res, i
-    return -1, None, len(betas)
+    k = len(betas)
+    res = solve(betas[0])
+    if res.ok:
+        return 0, res, 0
+    if k == 1 or not (res := solve(betas[-1])).ok:
+        return -1, None, k
+    lo, hi = 0, k - 1  # lo infeasible, hi feasible with result ``res``
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        r = solve(betas[mid])
+        if r.ok:
+            hi, res = mid, r
+        else:
+            lo = mid
+    return hi, res, hi
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,8 +88,8 @@ class CvarDecision:
     pose: F64  # (3,) robot pose x_k the decision was made from
     beta: float  # chosen β (NaN at a fallback)
     beta_index: int  # index into ``CvarBfConfig.betas`` (−1 at a fallback)
-    n_infeasible: int  # β levels found infeasible in this decision
-    n_solver_calls: int  # SLSQP calls in this decision
+    n_infeasible: int  # β levels below the chosen one (infeasible; all of them at a fallback)
+    n_solver_calls: int  # solver calls (2-D QPs, or SLSQP runs) in this decision
     fast_path: bool  # u_nom was feasible at the chosen β (no solver call)
     fallback: bool  # no β feasible: stop and turn toward the goal
     solve_time: float  # [s] wall time of the decision
