@@ -89,12 +89,14 @@ def cvar_weights(h: F64, p: F64, beta: float) -> F64:
     spent (the last one a fraction of it). Same shape as ``h``.
     """
     h = np.asarray(h, dtype=np.float64)
-    order = np.argsort(h, axis=-1, kind="stable")
-    ps = np.take_along_axis(np.broadcast_to(p, h.shape), order, axis=-1) / beta
+    flat = h.reshape(-1, h.shape[-1])  # (rows, S): plain fancy indexing, no *_along_axis
+    order = np.argsort(flat, axis=-1, kind="stable")
+    rows = np.arange(flat.shape[0])[:, None]
+    ps = np.broadcast_to(p, h.shape).reshape(flat.shape)[rows, order] / beta
     before = np.cumsum(ps, axis=-1) - ps  # mass given to the lower samples
-    q = np.empty_like(h)
-    np.put_along_axis(q, order, np.clip(1.0 - before, 0.0, ps), axis=-1)
-    return q
+    q = np.empty_like(flat)
+    q[rows, order] = np.minimum(np.maximum(1.0 - before, 0.0), ps)
+    return q.reshape(h.shape)
 
 
 def cvar_lower(h: F64, p: F64, beta: float) -> F64:
