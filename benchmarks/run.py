@@ -28,6 +28,8 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
 - ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 15 min
+- ``cvar_bf_decision``    CVaR-BF over 4 seeded HR-RL episodes                <= 4 ms, p90 <= 8 ms
+                          and its ratio to the host probe's GEMM (256³ float32) <= 19
 - ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights, 1 thread      <= 1 ms
 - ``crowdnav_train_throughput``  PPO trainer env steps/s, 16 and 32 envs       >= 2,000 /s (32)
 - ``vector_env``          64 envs: native vector env vs ``SyncVectorEnv``      native >= 5x sync

@@ -79,17 +79,38 @@ still leaves p_l a 0.9 m wide passage.
               the linearised wall constraints,  v ∈ [0, v_max],  |ω| ≤ ω_max,  η ≥ 0.
 
 w_v = 1 s²/m², w_ω = 0.1 s²/rad²: a change of 1 rad/s costs as much as one of 0.32 m/s, so the
-filter prefers to steer around a person rather than stop in front of them. Solved with OSQP
-(one workspace per decision; across β only the values of the CVaR rows change, so it is
-updated and warm-started); SciPy's SLSQP is available (``solver="slsqp"``) as a cross-check,
-but took 100–2,000 ms per solve here. A solve counts as feasible if the solver returns an
-iterate (solved, or stopped inaccurate / at the iteration limit) *and* that iterate satisfies
-every constraint to ``feasibility_tol`` = 1e-5 m². If u_nom itself satisfies every constraint
-at the current β it is the QP optimum and no solver is called (the fast path).
+filter prefers to steer around a person rather than stop in front of them.
 
-*Adaptive risk.* β runs through (0.05, 0.10, …, 0.70) from the most conservative level; the
-first feasible solve is kept. If no level is feasible the robot stops and turns in place toward
-the goal, |ω| ≤ ``fallback_omega`` = 0.5 rad/s; turning in place does not move the body.
+*Solving it.* ζ and η only express CVaR_β(h_j(u)) ≥ (1 − γ) h(x_k), a concave piecewise-linear
+constraint on the two-dimensional u: CVaR_β(h(u)) = min_q Σ_s q_s h_s(u) over the tail weights
+0 ≤ q_s ≤ p_s/β, Σ_s q_s = 1. The default solver (``solver="exact"``) works in u alone by
+cutting planes (Kelley): minimise the cost over the box, the walls and the cuts found so far,
+exactly (a strictly convex QP in two variables: the cheapest of the unconstrained minimum, the
+projections onto each row and the crossings of two rows that satisfies every row); at the
+solution, for every human whose exact CVaR constraint fails, add the cut Σ_s q*_s h_s(u) ≥
+(1 − γ) h(x_k) with the tail weights q* there (valid everywhere, tight at that point); stop when
+no constraint fails — the solution of a relaxation that is feasible is the QP's optimum — or
+when the relaxation is empty, which proves the level infeasible. Cuts are finitely many (q* is
+a vertex of the weights' polytope), in practice 1–4 rounds. ``solver="osqp"`` solves the same
+two-variable QPs with OSQP (one workspace per episode, updated and warm-started from the last
+solve); ``solver="slsqp"`` solves the lifted QP above with SciPy's SLSQP (100–2,000 ms per
+solve), both cross-checks. A solve counts as feasible if its solution satisfies every
+constraint to ``feasibility_tol`` = 1e-5 m². If u_nom itself satisfies every constraint at the
+current β it is the QP optimum and nothing is solved (the fast path).
+
+Earlier versions solved the lifted QP with OSQP. Its ADMM iterations stopped at the limit
+(2,000, ≈ 2.7 ms) on levels that were feasible with margins up to 0.18 m², so the "first
+feasible" level was often a larger β than the first feasible one (422 of 1,001 decisions of the
+regression episodes): less conservative than the method, and dependent on the warm start.
+
+*Adaptive risk.* The first feasible level of β ∈ (0.05, 0.10, …, 0.70), from the most
+conservative, is kept. Feasibility grows with β (a point feasible at β is feasible at every
+β' > β: the η terms, η ≥ 0, shrink by β/β'), so it is found by bisection (``select_beta``):
+level 0.05 first (the usual answer), then 0.70 (if infeasible, none is), then halving the gap —
+at most 6 solves instead of 14, the same level as trying them in order (the regression
+reference and a property test check it). If no level is feasible the robot stops and turns in
+place toward the goal, |ω| ≤ ``fallback_omega`` = 0.5 rad/s; turning in place does not move
+the body.
 
 Differences from the original, and why
 --------------------------------------
@@ -101,14 +122,16 @@ Differences from the original, and why
 - The fast path and the safe fallback are ours; the original counts an infeasible QP as a
   failure.
 
-Counters: ``n_decisions``, ``n_solves`` (solver calls), ``n_infeasible`` (β levels that
-failed), ``n_fallback`` (decisions with no feasible β) accumulate over the policy's lifetime;
+Counters: ``n_decisions``, ``n_solves`` (solver calls: 2-D QPs, or SLSQP runs),
+``n_infeasible`` (β levels below the chosen one, all infeasible), ``n_fallback`` (decisions
+with no feasible β) accumulate over the policy's lifetime;
 ``betas`` (chosen β per step, NaN at a fallback) and ``solve_times`` [s] (wall time per
 decision) are kept per episode; ``last`` is the latest :class:`CvarDecision`.
 """
 
 from pioneer.baselines.cvar_bf.barriers import (
     cvar_lower,
+    cvar_weights,
     dynamic_zone_barrier,
     lookahead_jacobian,
     lookahead_point,
@@ -125,6 +148,7 @@ __all__ = [
     "CvarDecision",
     "QPResult",
     "cvar_lower",
+    "cvar_weights",
     "dynamic_zone_barrier",
     "lookahead_jacobian",
     "lookahead_point",

@@ -41,8 +41,10 @@ class CvarBfConfig(Config):
     slow_distance: float = 0.5  # [m] nominal slows down linearly inside this goal distance
     fallback_omega: float = 0.5  # [rad/s] |ω| bound of the turn-in-place fallback
     feasibility_tol: float = 1e-5  # accepted constraint violation of a solve [m²]
-    solver: str = "osqp"  # "osqp" (default) or "slsqp" (SciPy; ~100× slower, a cross-check)
+    solver: str = "exact"  # QP solver: "exact" (cutting planes, exact 2-D QPs), "osqp" (the
+    # same cutting planes, OSQP on each 2-D QP) or "slsqp" (SciPy on the lifted QP; ~100× slower)
     max_iter: int = 2000  # iteration limit per solve (OSQP ADMM iterations / SLSQP steps)
+    max_rounds: int = 20  # cutting-plane rounds (OSQP calls) per β level at most
     refine: int = 1  # re-linearisations around the solution at the chosen β (0: none)
 
     def __post_init__(self) -> None:
@@ -79,13 +81,19 @@ class CvarBfConfig(Config):
             raise ConfigError(
                 expect("CvarBfConfig.n_samples", "an integer >= 1", self.n_samples, "use 15")
             )
-        if self.solver not in ("osqp", "slsqp"):
+        if self.solver not in ("exact", "osqp", "slsqp"):
             raise ConfigError(
-                expect("CvarBfConfig.solver", "'osqp' or 'slsqp'", self.solver, "use 'osqp'")
+                expect(
+                    "CvarBfConfig.solver", "'exact', 'osqp' or 'slsqp'", self.solver, "use 'exact'"
+                )
             )
         if not isinstance(self.refine, int) or self.refine < 0:
             raise ConfigError(
                 expect("CvarBfConfig.refine", "an integer >= 0", self.refine, "use 1")
+            )
+        if not isinstance(self.max_rounds, int) or self.max_rounds < 1:
+            raise ConfigError(
+                expect("CvarBfConfig.max_rounds", "an integer >= 1", self.max_rounds, "use 20")
             )
         if not isinstance(self.max_iter, int) or self.max_iter < 1:
             raise ConfigError(

@@ -13,7 +13,6 @@ import scipy.optimize
 from numpy.typing import NDArray
 
 from pioneer.baselines.cvar_bf.barriers import (
-    cvar_lower,
     dynamic_zone_barrier,
     lookahead_jacobian,
     lookahead_point,
@@ -25,7 +24,11 @@ from pioneer.baselines.cvar_bf.qp import (
     QPResult,
     _Linearised,
     _OsqpWorkspace,
+    cut_rows,
+    lifted_solution,
+    qp_2d,
     select_beta,
+    wall_rows,
 )
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE
@@ -34,6 +37,9 @@ from pioneer.sim.world import State, World
 __all__ = ["CvarBfPolicy", "make_cvar_bf"]
 
 F64 = NDArray[np.float64]
+# OSQP statuses whose iterate is used; an inaccurate or unconverged one still counts if it
+# satisfies every constraint (checked exactly after the solve): a feasible command.
+_USABLE = ("solved", "solved inaccurate", "maximum iterations reached")
 
 
 class CvarBfPolicy:
@@ -59,6 +65,7 @@ class CvarBfPolicy:
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Seed the sampling generator from ``rng``; clear the per-episode lists."""
         self._rng = np.random.default_rng(rng.integers(0, 2**63 - 1))
+        self._ws = None  # a fresh solver workspace: an episode does not depend on the last one
         self.last = None
         self.betas = []
         self.solve_times = []
@@ -188,23 +195,17 @@ class CvarBfPolicy:
     def solve(self, world: World, lin: _Linearised, beta: float) -> QPResult:
         """The CVaR-BF QP at risk level ``beta`` (fast path if u_nom is feasible)."""
         cfg = self.config
-        gam = cfg.gamma
-        tol = cfg.feasibility_tol
-        n, s = lin.h0.shape
-        if bool(
-            np.array_equal(lin.u_lin, lin.u_nom)
-            and np.all(cvar_lower(lin.h0, lin.p, beta) >= (1.0 - gam) * lin.h_k - tol)
-            and np.all(lin.hw0 >= (1.0 - gam) * lin.hw_k - tol)
-        ):
-            zeta = -lin.h0.min(axis=1) if n else np.zeros(0)
-            z = np.concatenate([lin.u_nom, zeta, np.zeros(n * s)])
+        if np.array_equal(lin.u_lin, lin.u_nom) and self._violation(
+            world, lin, beta, lin.u_nom
+        ) <= (cfg.feasibility_tol):
+            z = lifted_solution(lin, beta, lin.u_nom)
             return QPResult(True, lin.u_nom.copy(), z, 0.0, False, "nominal feasible")
+        if cfg.solver in ("exact", "osqp"):
+            return self._solve_cuts(world, lin, beta)
+        n, _ = lin.h0.shape
         mat, off = self._constraints(lin, beta)
         self.n_solves += 1
-        if cfg.solver == "osqp":
-            z, success, message = self._solve_osqp(world, lin, mat, off)
-        else:
-            z, success, message = self._solve_slsqp(world, lin, mat, off)
+        z, success, message = self._solve_slsqp(world, lin, mat, off)
         rob = world.sim.robot
         u = np.clip(z[:2], rob.command_low, rob.command_high)
         viol = max(
@@ -212,7 +213,91 @@ class CvarBfPolicy:
             float(np.abs(u - z[:2]).max()),
             float(max(0.0, -z[2 + n :].min(initial=0.0))),
         )
-        return QPResult(success and viol <= tol, u, z, viol, True, message)
+        return QPResult(success and viol <= cfg.feasibility_tol, u, z, viol, True, message)
+
+    def _violation(self, world: World, lin: _Linearised, beta: float, u: F64) -> float:
+        """Largest violation [m²] of the linearised CVaR and wall constraints at ``u`` (exact:
+        the CVaR of the samples, not a cut), and of the command box."""
+        gam = self.config.gamma
+        val, need, _, _ = cut_rows(lin, beta, gam, u)
+        wc, wl = wall_rows(lin, gam)
+        rob = world.sim.robot
+        return max(
+            float(np.max(need - val, initial=0.0)),
+            float(np.max(wl - wc @ u, initial=0.0)),
+            float(np.max(rob.command_low - u, initial=0.0)),
+            float(np.max(u - rob.command_high, initial=0.0)),
+        )
+
+    def _solve_cuts(self, world: World, lin: _Linearised, beta: float) -> QPResult:
+        """The QP in u alone by cutting planes (Kelley): minimise the cost over the box, the
+        walls and the cuts found so far (a relaxation of the CVaR constraints) with
+        :func:`qp_2d` (``solver="exact"``) or OSQP (``"osqp"``); add a cut for every human whose
+        exact CVaR constraint the solution violates, until none is. The last solution is then
+        the QP's optimum (optimal for a relaxation and feasible); an empty relaxation proves
+        the level infeasible."""
+        cfg = self.config
+        gam, tol = cfg.gamma, cfg.feasibility_tol
+        rob = world.sim.robot
+        n = lin.h0.shape[0]
+        w = np.array([cfg.weight_v, cfg.weight_omega])
+        wc, wl = wall_rows(lin, gam)
+        coef: list[F64] = [np.eye(2), wc]
+        lo: list[F64] = [rob.command_low, wl]
+        hi: list[F64] = [rob.command_high, np.full(wl.shape, np.inf)]
+
+        def add_cuts(u: F64) -> bool:
+            val, need, c, b = cut_rows(lin, beta, gam, u)
+            bad = val < need - tol
+            coef.append(c[bad])
+            lo.append(b[bad])
+            hi.append(np.full(int(bad.sum()), np.inf))
+            return bool(bad.any())
+
+        add_cuts(lin.u_nom)
+        if not np.array_equal(lin.u_lin, lin.u_nom):
+            add_cuts(lin.u_lin)  # a refined solve: the previous solution's cuts too
+        u, status = lin.u_nom, ""
+        x: F64 | None
+        for _ in range(cfg.max_rounds):
+            a, b = np.concatenate(coef), np.concatenate(lo)
+            if np.all(a @ lin.u_nom >= b):
+                x, status = lin.u_nom.copy(), "solved"  # the cost's minimum is feasible
+            elif cfg.solver == "exact":
+                fin = np.concatenate(hi) < np.inf  # the box's upper bounds as rows −u ≥ −hi
+                x = qp_2d(
+                    w,
+                    lin.u_nom,
+                    np.concatenate([a, -a[fin]]),
+                    np.concatenate([b, -np.concatenate(hi)[fin]]),
+                )
+                status = "solved" if x is not None else "primal infeasible"
+                self.n_solves += 1
+            else:
+                x, status = self._workspace(world, n, a.shape[0]).solve(
+                    lin.u_nom, a, b, np.concatenate(hi)
+                )
+                self.n_solves += 1
+            if x is None or status not in _USABLE:
+                break
+            u = np.clip(x, rob.command_low, rob.command_high)
+            if not add_cuts(u):
+                break
+        else:
+            status = "cut limit reached"
+        viol = self._violation(world, lin, beta, u)
+        ok = status in _USABLE and viol <= tol
+        return QPResult(ok, u, lifted_solution(lin, beta, u), viol, True, status)
+
+    def _workspace(self, world: World, n: int, rows: int) -> _OsqpWorkspace:
+        """The policy's OSQP workspace, re-made larger when ``rows`` exceed its capacity."""
+        ws = self._ws
+        if ws is None or ws.capacity < rows:
+            cap = max(
+                rows, 2 + world.walls.shape[0] + 4 * max(n, 1), 2 * (ws.capacity if ws else 0)
+            )
+            ws = self._ws = _OsqpWorkspace(self.config, cap)
+        return ws
 
     def _bounds(self, world: World, n: int, s: int) -> tuple[F64, F64]:
         """Variable bounds of z: the command box, ζ free, η ≥ 0."""
@@ -220,16 +305,6 @@ class CvarBfPolicy:
         lo = np.concatenate([rob.command_low, np.full(n, -np.inf), np.zeros(n * s)])
         hi = np.concatenate([rob.command_high, np.full(n + n * s, np.inf)])
         return lo, hi
-
-    def _solve_osqp(
-        self, world: World, lin: _Linearised, mat: F64, off: F64
-    ) -> tuple[F64, bool, str]:
-        """OSQP on the QP; one workspace per decision, re-used across β (only the CVaR rows'
-        η coefficients change, so the sparsity pattern is fixed and the solve warm-starts)."""
-        ws = self._ws
-        if ws is None or ws.lin is not lin:
-            ws = self._ws = _OsqpWorkspace(world, lin, off, self.config)
-        return ws.solve(mat)
 
     def _solve_slsqp(
         self, world: World, lin: _Linearised, mat: F64, off: F64
@@ -289,12 +364,10 @@ class CvarBfPolicy:
         lin, extra = self.linearise(world, state)
         solves_before = self.n_solves
         i, res, n_failed = select_beta(lambda b: self.solve(world, lin, b), cfg.betas)
-        self._ws = None
         for _ in range(cfg.refine if res is not None and res.solver_call else 0):
             # Sequential linearisation: the same samples, linearised at the last solution.
             lin_r = self.linearise_at(world, state, extra, lin.u_nom, res.u)  # type: ignore[union-attr]
             res_r = self.solve(world, lin_r, cfg.betas[i])
-            self._ws = None
             if not res_r.ok:
                 break
             lin, res = lin_r, res_r
