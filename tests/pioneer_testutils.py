@@ -229,6 +229,23 @@ class Stopped:
     stderr: str
     left: list[int]
 
+    def assert_clean(self, signum: int) -> None:
+        """Exit 128 + ``signum`` within the issue's 2 s, and no process left behind."""
+        assert self.returncode == 128 + signum
+        assert self.seconds < 2.0
+        assert self.left == []
+
+
+def run_cli(*argv: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """``pioneer ARGV`` in a fresh interpreter (exit code and stderr as a user sees them)."""
+    return subprocess.run(
+        [sys.executable, "-m", "pioneer.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
 
 def _processes() -> dict[int, tuple[int, str, str]]:
     """pid → (parent pid, state, start time) of every process (Linux ``/proc``)."""

@@ -7,7 +7,6 @@ import json
 import shlex
 import signal
 import subprocess
-import sys
 
 import pytest
 
@@ -16,6 +15,7 @@ from pioneer.cli import main
 from pioneer.control.teacher import make_teacher
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import EPISODES_FILE, read_records
+from pioneer_testutils import run_cli
 
 
 def _one_error_line(err: str) -> str:
@@ -27,13 +27,7 @@ def _one_error_line(err: str) -> str:
 
 def _pioneer(*argv: str) -> subprocess.CompletedProcess[str]:
     """The CLI in a fresh interpreter (exit code and stderr as a user sees them)."""
-    return subprocess.run(
-        [sys.executable, "-m", "pioneer.cli", *argv],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    return run_cli(*argv, timeout=300)
 
 
 def _eval_argv(out, *extra):

@@ -13,7 +13,7 @@ from pioneer.baselines.crowdnav.ppo import PPOConfig
 from pioneer.cli import main
 from pioneer.learn.dagger import DaggerConfig
 from pioneer.reward.density import DensityConfig
-from pioneer_testutils import assert_house_message
+from pioneer_testutils import assert_house_message, run_cli
 
 COMMANDS = [
     ["run"],
@@ -153,13 +153,7 @@ def test_without_tyros_hook_a_refusal_is_still_one_line(monkeypatch, capsys):
 def test_an_unknown_scenario_is_one_line_and_writes_nothing(tmp_path):
     out = tmp_path / "x"
     argv = ["eval", "--scenario", "nope", "--policy", "teacher", "--out", str(out)]
-    proc = subprocess.run(
-        [sys.executable, "-m", "pioneer.cli", *argv],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    proc = run_cli(*argv, timeout=300)
     assert proc.returncode == 2
     lines = proc.stderr.strip("\n").splitlines()
     assert len(lines) == 1 and lines[0].startswith("pioneer: error: ")
