@@ -72,7 +72,9 @@ def bench_density_eval(plan: Plan) -> Result:
 
 def bench_teacher_decision(plan: Plan) -> Result:
     """One teacher decision (120 candidates × 10 states: world step, rays, density, scoring),
-    and the same pieces alone, to show where the time goes."""
+    and the same pieces alone, to show where the time goes; with the decision's ratio to the
+    host probe's GEMM (256³ float32), timed in the same rounds, so that a busy host does not
+    decide the verdict."""
     from pioneer.control.rollout import rollout
     from pioneer.control.teacher import make_teacher
     from pioneer.reward.features import feature_map
@@ -88,8 +90,10 @@ def bench_teacher_decision(plan: Plan) -> Result:
         "decision": Case(lambda _: teacher.decide(world, state)),
         "rollout": Case(lambda _: rollout(world, state, teacher.candidates)),
         "density": Case(lambda _: density(feats)),
+        "gemm": sgemm_256_case(),
     }
     secs = time_cases(cases, plan.batch_repeats, warmup=3)
+    ratio = float(np.median(secs["decision"]) / np.median(secs["gemm"]))
     inducing = int(density.alpha_.shape[0])  # type: ignore[union-attr]
     flops = 2 * feats.shape[0] * inducing * feats.shape[1]
     return {
@@ -97,6 +101,8 @@ def bench_teacher_decision(plan: Plan) -> Result:
             "ms_decision": metric(secs["decision"] * 1e3, "ms", ("<=", 10.0)),
             "ms_rollout_120x10": metric(secs["rollout"] * 1e3, "ms"),
             "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
+            "ratio_decision_over_sgemm_256": metric([ratio], "x", ("<=", 12.0)),
+            "ms_sgemm_256": metric(secs["gemm"] * 1e3, "ms"),
         },
         "info": {
             "candidates": int(teacher.candidates.shape[0]),

@@ -22,6 +22,8 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``pysocialforce_step``  the same scene in the ``pysocialforce`` package, and ours/theirs
 - ``raycast_batch``       ``cast_rays`` for 1,200 poses x 72 beams              <= 2 ms
 - ``world_step_batch``    ``step`` on 120 copies x 10 steps of 0.3 s            <= 3 ms
+- ``teacher_decision``    one lookahead-teacher decision (120 x 10 rollouts)   <= 10 ms
+                          and its ratio to the host probe's GEMM (256³ float32) <= 12
 - ``student_decision``    student scan → command via ONNX Runtime              <= 0.2 ms
                           obs → command via PyTorch                            <= 1 ms
                           and the teacher/student decision-time ratio

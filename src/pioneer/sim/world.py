@@ -391,7 +391,13 @@ def _step_kernel(
             mx = 0.5 * (x + x1)
             my = 0.5 * (y + y1)
             wall_offsets(mx, my, wall_tab, wall_scr)
-            for k in range(m):
+            # The wall nearest the chord's midpoint first: its distance makes the cheap bound
+            # below skip most of the others (a minimum does not depend on the order).
+            near = 0
+            for k in range(1, m):
+                near = k if wall_scr[2, k] < wall_scr[2, near] else near
+            for j in range(m):
+                k = near if j == 0 else (j - 1 if j <= near else j)
                 # Cheap bound first: the chord lies within `half` of its midpoint.
                 if wall_scr[2, k] - half - r_robot - sag >= wmin:
                     continue
