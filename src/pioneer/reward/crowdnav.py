@@ -64,13 +64,24 @@ class _Parts(NamedTuple):
         return self.first + self.intrusion + self.spin + self.reverse
 
 
+_COLLISION, _SUCCESS = int(Event.COLLISION), int(Event.SUCCESS)  # plain ints: no enum lookup
+
+
+def _norm2(d: F64) -> F64:
+    """‖d‖ over the last axis of length 2: the same sum of squares as ``np.linalg.norm``
+    (bit for bit), without its per-call overhead."""
+    x, y = d[..., 0], d[..., 1]
+    out: F64 = np.sqrt(x * x + y * y)
+    return out
+
+
 def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _Parts:
     sim = world.sim
     dt = sim.dt
     event = classify(prev, new, sim.time_limit)
-    collided, reached = event == Event.COLLISION, event == Event.SUCCESS
-    d0 = np.linalg.norm(prev.goal - prev.robot[:, :2], axis=1)
-    d1 = np.linalg.norm(new.goal - new.robot[:, :2], axis=1)
+    collided, reached = event == _COLLISION, event == _SUCCESS
+    d0 = _norm2(prev.goal - prev.robot[:, :2])
+    d1 = _norm2(new.goal - new.robot[:, :2])
     c = new.clearance
     close = c < rc.discomfort_distance
     ongoing = ~(collided | reached)
@@ -82,7 +93,7 @@ def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _
     if new.n_humans:
         ks = np.arange(1, rc.n_pred + 1) * rc.pred_dt
         pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
-        dist = np.linalg.norm(pred - new.robot[:, None, None, :2], axis=-1)  # (B, N, K)
+        dist = _norm2(pred - new.robot[:, None, None, :2])  # (B, N, K)
         hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
         pen = rc.intrusion / 2.0 ** (np.arange(1, rc.n_pred + 1) + 1)  # (K,)
         intr = np.where(ongoing, np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2)), 0.0)
@@ -100,8 +111,8 @@ def crowdnav_reward_terms(
     rc = config
     p = _parts(world, prev, new, rc)
     terms = {
-        "success": np.where(p.event == Event.SUCCESS, rc.success, 0.0),
-        "collision": np.where(p.event == Event.COLLISION, rc.collision, 0.0),
+        "success": np.where(p.event == _SUCCESS, rc.success, 0.0),
+        "collision": np.where(p.event == _COLLISION, rc.collision, 0.0),
         "discomfort": np.where(p.ongoing & p.close, p.base, 0.0),
         "progress": np.where(p.ongoing & ~p.close, p.base, 0.0),
         "intrusion": p.intrusion,
