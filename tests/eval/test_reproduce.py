@@ -51,6 +51,10 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
     before = (smoke / "eval" / "episodes.jsonl").read_text()
     assert main(["reproduce", "--profile", "smoke", "--out", str(smoke), "--workers", "1"]) == 0
     assert (smoke / "eval" / "episodes.jsonl").read_text() == before
+    # the report counts the episodes' run time over every invocation, not only the last one
+    recs = read_records(smoke / "eval" / "episodes.jsonl")
+    total_min = sum(r["wall_time_s"] for r in recs) / 60
+    assert f"the episodes ran for {total_min:.1f} min in all" in (smoke / "index.md").read_text()
 
 
 def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys):

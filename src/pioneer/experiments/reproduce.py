@@ -142,7 +142,10 @@ def reproduce(
     md += _table_iv(out, records)
     figures = _figures(out, reward_tpl)
     elapsed = time.perf_counter() - t0
-    write_text_atomic(out / "index.md", _index(profile, prof, md, figures, elapsed, len(records)))
+    episode_s = sum(float(r.get("wall_time_s", 0.0)) for r in records)
+    write_text_atomic(
+        out / "index.md", _index(profile, prof, md, figures, (elapsed, episode_s), len(records))
+    )
     head = {
         k: summary[f"{k}/teacher"]["success_rate"]["mean"]
         for k in SCENARIOS
@@ -271,14 +274,24 @@ def _figures(out: Path, reward_tpl: str) -> dict[str, str]:
 
 
 def _index(
-    profile: str, prof: Profile, tables: str, figs: dict[str, str], elapsed: float, n: int
+    profile: str,
+    prof: Profile,
+    tables: str,
+    figs: dict[str, str],
+    times: tuple[float, float],
+    n: int,
 ) -> str:
+    """The report; ``times`` = (this invocation's wall time, the episodes' summed run time,
+    over every invocation of a resumed run) [s]."""
+    elapsed, episode_s = times
     study = json.loads(figs.pop("_study"))
     lines = [
         "# PioneeR — reproduction report",
         "",
         f"Profile `{profile}`: {prof.seeds} seeds × {prof.trials} trials per scenario and "
-        f"policy ({n} episodes), {elapsed / 60:.1f} min. "
+        f"policy ({n} episodes), {elapsed / 60:.1f} min in the last invocation; the episodes "
+        f"ran for {episode_s / 60:.1f} min in all, summed over the workers and over every "
+        "invocation of a resumed run. "
         f"Command: `pioneer reproduce --profile {profile}`.",
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
