@@ -27,6 +27,7 @@ import tyro
 
 from pioneer.cli._common import Command, check_outputs
 from pioneer.cli._parse import parse, refuse
+from pioneer.config import check_option_bounds
 from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
 from pioneer.interrupt import Interrupted, handle_signals
 
@@ -203,6 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         command, scenario_files = _parse(args)
         _single_threaded_blas()
         _register_scenario_files(scenario_files)
+        check_option_bounds(command)  # --workers >= 1, --seed >= 0 …
         check_outputs(command)
         return int(command.run())
     except PioneerError as exc:

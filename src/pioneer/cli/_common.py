@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
 import tyro
 from annotated_types import Ge
 
-from pioneer.config import check_option_bounds
 from pioneer.errors import ConfigError, expect
 
 if TYPE_CHECKING:
@@ -105,7 +104,6 @@ def check_outputs(command: object) -> None:
     so an hour's run does not end at a path it cannot write."""
     from pioneer.io import check_regular_target, output_dir_kind
 
-    check_option_bounds(command)
     hints = typing.get_type_hints(type(command), include_extras=True)
     for f in dataclasses.fields(command):  # type: ignore[arg-type]
         marks = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, Output)]

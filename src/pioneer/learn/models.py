@@ -44,8 +44,8 @@ from torch import nn
 
 from pioneer.config import Config, check_nonnegative
 from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
-from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.nn.checkpoint import load_checked, read_checkpoint, write_checkpoint
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
 from pioneer.sim.lidar import OBS_DIM
 
@@ -414,12 +414,7 @@ def load_student(path: str | Path) -> MDN | MLPStudent:
     """
     p = Path(path)
     meta, arrays = _read_checkpoint(p, tensors=True)
-    try:
-        cfg = StudentConfig.from_dict(meta["config"])
-    except PioneerError as exc:
-        raise DataError(
-            expect(f"{p}: config", "a valid StudentConfig", str(exc), "re-save the checkpoint")
-        ) from exc
+    cfg = stored_config(p, meta, StudentConfig, "re-save the checkpoint")
     return load_checked(
         build_student(cfg), arrays, p, f"{cfg.kind} {cfg.to_dict()}", "re-train or re-save it"
     )

@@ -12,12 +12,23 @@ from typing import Any, TypeVar
 import torch
 from torch import nn
 
-from pioneer.errors import DataError, expect
+from pioneer.config import Config
+from pioneer.errors import DataError, PioneerError, expect
 from pioneer.io import atomic_path, to_json
 
-__all__ = ["load_checked", "read_checkpoint", "write_checkpoint"]
+__all__ = ["load_checked", "read_checkpoint", "stored_config", "write_checkpoint"]
 
 M = TypeVar("M", bound=nn.Module)
+C = TypeVar("C", bound=Config)
+
+
+def stored_config(p: Path, meta: Mapping[str, Any], cls: type[C], fix: str) -> C:
+    """The ``cls`` config stored in a checkpoint's metadata; an invalid one raises one
+    :class:`DataError` naming the file."""
+    try:
+        return cls.from_dict(meta["config"])
+    except PioneerError as exc:
+        raise DataError(expect(f"{p}: config", f"a valid {cls.__name__}", str(exc), fix)) from exc
 
 
 def write_checkpoint(

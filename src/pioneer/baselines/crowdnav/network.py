@@ -15,8 +15,8 @@ from numpy.typing import NDArray
 from torch import nn
 
 from pioneer.config import Config, check_positive
-from pioneer.errors import ConfigError, DataError, PioneerError, expect
-from pioneer.nn.checkpoint import load_checked, read_checkpoint, write_checkpoint
+from pioneer.errors import ConfigError, expect
+from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
 
 __all__ = [
@@ -196,12 +196,7 @@ def load_crowdnav(path: str | Path) -> CrowdNavNet:
     """Rebuild the network saved at ``path`` in eval mode; a bad file raises :class:`DataError`."""
     p = Path(path)
     meta, arrays = _read(p, tensors=True)
-    try:
-        cfg = CrowdNavConfig.from_dict(meta["config"])
-    except PioneerError as exc:
-        raise DataError(
-            expect(f"{p}: config", "a valid CrowdNavConfig", str(exc), "re-train or re-save")
-        ) from exc
+    cfg = stored_config(p, meta, CrowdNavConfig, "re-train or re-save")
     return load_checked(
         CrowdNavNet(cfg), arrays, p, f"CrowdNav++ {cfg.to_dict()}", "re-train or re-save it"
     )
