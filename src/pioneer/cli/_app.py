@@ -75,7 +75,10 @@ _TREE = _Group(
             {
                 "crowdnav++": _Leaf(
                     "learning:TrainCrowdNav", "CrowdNav++ with PPO (resumes an existing --out)"
-                )
+                ),
+                "sb3-ppo": _Leaf(
+                    "learning:TrainSb3", "Stable-Baselines3 PPO on the Gymnasium environment"
+                ),
             },
         ),
         "demos": _Group(

@@ -174,9 +174,8 @@ def policy_spec(text: str) -> PolicySpec:
 
     spec = PolicySpec.parse(text)
     check_policy_name(spec.name)
-    kwargs = dict(spec.kwargs)
+    kwargs = check_policy_kwargs(spec.name, dict(spec.kwargs))
     if kwargs:
-        kwargs = check_policy_kwargs(spec.name, kwargs)
         for key in ("checkpoint", "model", "reward", "weights"):
             if isinstance(kwargs.get(key), str) and "{" not in kwargs[key]:
                 kwargs[key] = str(Path(kwargs[key]).resolve())

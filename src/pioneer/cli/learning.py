@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
 from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
+from pioneer.baselines.sb3 import train_sb3_ppo
 from pioneer.cli._common import (
     Flag,
     OutDir,
@@ -43,7 +44,7 @@ else:
     Expert = one_of(EXPERTS)
     UnseenRule = one_of(UNSEEN_RULES)
 
-__all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav"]
+__all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,6 +169,38 @@ class TrainCrowdNav:
             torch_threads=self.threads,
         )
         print(to_json({"out": self.out, **{k: summary[k] for k in ("updates", "env_steps")}}))
+        print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainSb3:
+    """Stable-Baselines3 PPO (its defaults, MlpPolicy) on the Gymnasium environment with the
+    environment's own reward; writes policy.safetensors (no pickle), curve.csv/png, train.json.
+    Needs the sb3 extra."""
+
+    out: OutDir
+    """output folder (must not hold an SB3 run)"""
+    scenario: str = "hr-rl"
+    """hr-rl → pioneer/ElevatorHRRL-v0, hl-rr → pioneer/ElevatorHLRR-v0; others by name"""
+    steps: int = 1_000_000
+    """total environment steps"""
+    envs: int = default(train_sb3_ppo, "n_envs")
+    """environments (SB3's make_vec_env)"""
+    seed: Seed = default(train_sb3_ppo, "seed")
+    """seeds SB3 and the environments"""
+
+    def run(self) -> int:
+        """Train; print the outputs and the final statistics (JSON lines)."""
+        summary = train_sb3_ppo(
+            self.scenario,
+            self.out,
+            steps=self.steps,
+            n_envs=self.envs,
+            seed=self.seed,
+            command=command_line(),
+        )
+        print(to_json({"out": self.out, "env_steps": summary["env_steps"]}))
         print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
         return 0
 

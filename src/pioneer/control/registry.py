@@ -135,6 +135,12 @@ _BUILTINS = (
         extra="learn",
     ),
     _builtin(
+        "sb3-ppo",
+        "pioneer.baselines.sb3:make_sb3_policy",
+        "Stable-Baselines3 PPO on the LiDAR observation (weights=FILE)",
+        extra="sb3",
+    ),
+    _builtin(
         "student-mdn",
         "pioneer.learn.policy:make_student_policy",
         "DAgger MDN student",
@@ -241,8 +247,24 @@ def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
     """``kwargs`` checked against the parameters the factory of ``name`` declares — their
     names, types and ``Annotated`` ranges, declared once on the factory's signature — and
     returned typed (imports the factory: torch for the students). Raises :class:`ConfigError`
-    naming the parameter, what it takes and the fix."""
-    return check_parameters(f"policy {name}", policy_entry(name).target(), dict(kwargs))
+    naming the parameter, what it takes and the fix; so does a required parameter (one without
+    a default) that neither ``kwargs`` nor the entry gives."""
+    entry = policy_entry(name)
+    factory = entry.target()
+    given = {*kwargs, *dict(entry.kwargs), "scenario"}
+    missing = [
+        p.name
+        for p in inspect.signature(factory).parameters.values()
+        if p.default is inspect.Parameter.empty
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in given
+    ]
+    if missing:
+        example = ",".join(f"{k}=…" for k in missing)
+        raise ConfigError(
+            expect(f"policy {name}", f"a value for {missing}", "none", f"use {name}:{example}")
+        )
+    return check_parameters(f"policy {name}", factory, dict(kwargs))
 
 
 def check_parts(name: str, scenario: str, kwargs: Mapping[str, Any]) -> None:

@@ -1,0 +1,289 @@
+"""Stable-Baselines3 PPO on the Gymnasium environments, as a user of Gymnasium would train it.
+
+``train_sb3_ppo`` makes ``pioneer/ElevatorHRRL-v0`` (or ``…HLRR-v0``; other scenarios through the
+``scenario`` keyword) with ``stable_baselines3.common.env_util.make_vec_env``, trains SB3's
+``PPO("MlpPolicy")`` with SB3's default hyperparameters on the environment's own reward (the
+29-D LiDAR observation, absolute (v, ω) actions), and writes
+
+- ``policy.safetensors``: the policy network's tensors, with the SB3 version, the network
+  architecture, the spaces and the training settings as JSON metadata. SB3's own ``.zip``
+  holds pickles, which this project never asks a user to load, so it is not written;
+- ``curve.csv`` (appended after every rollout), ``curve.png`` and ``train.json``.
+
+``make_sb3_policy`` rebuilds the policy from that file (no pickle) as the registry's
+``sb3-ppo`` policy; it acts on the observation alone with the Gaussian's mean.
+
+An interrupted run is not resumed (SB3 keeps its resumable state only in pickles); a run of the
+scale used here takes minutes. Needs the ``sb3`` extra: ``pip install pioneer-nav[sb3]``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import atomic_path, output_dir, to_json
+from pioneer.registration import ENV_IDS, register_envs
+
+__all__ = [
+    "CURVE_COLUMNS",
+    "SB3_FORMAT",
+    "Sb3Policy",
+    "env_id_for",
+    "make_sb3_policy",
+    "train_sb3_ppo",
+]
+
+SB3_FORMAT = "pioneer.sb3-ppo/1"
+CURVE_COLUMNS = (
+    "rollout",
+    "env_steps",
+    "episodes",
+    "mean_return",
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "wall_time_s",
+)
+WINDOW = 100  # finished episodes in the curve's running statistics
+_FALLBACK_ID = "pioneer/ElevatorHRRL-v0"  # any registered id; ``scenario=`` picks the world
+
+
+def env_id_for(scenario: str) -> tuple[str, dict[str, Any]]:
+    """The Gymnasium id (and keyword arguments) that make ``scenario``'s environment."""
+    by_scenario = {name: env_id for env_id, name in ENV_IDS.items()}
+    if scenario in by_scenario:
+        return by_scenario[scenario], {}
+    return _FALLBACK_ID, {"scenario": scenario}
+
+
+def _curve_row(
+    rollout: int, steps: int, episodes: int, window: list[tuple[float, str]], wall: float
+) -> list[float]:
+    if not window:
+        return [rollout, steps, episodes, np.nan, np.nan, np.nan, np.nan, round(wall, 2)]
+    returns = np.array([r for r, _ in window])
+    events = [e for _, e in window]
+    share = {e: events.count(e) / len(events) for e in ("success", "collision", "timeout")}
+    return [
+        rollout,
+        steps,
+        episodes,
+        float(returns.mean()),
+        share["success"],
+        share["collision"],
+        share["timeout"],
+        round(wall, 2),
+    ]
+
+
+def _make_callback(out: Path, total: int, progress: bool) -> Any:
+    """An SB3 callback that keeps the learning curve (appended to ``curve.csv`` after every
+    rollout) and a progress bar."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class _Curve(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.rows: list[list[float]] = []
+            self.window: list[tuple[float, str]] = []
+            self.episodes = 0
+            self.t0 = time.perf_counter()
+            self.bar = tqdm(total=total, unit="step", desc="sb3-ppo", disable=not progress)
+
+        def _on_step(self) -> bool:
+            infos = self.locals.get("infos", [])
+            for info in infos:
+                ep = info.get("episode")
+                if ep is not None:
+                    self.episodes += 1
+                    self.window = [*self.window, (float(ep["r"]), str(info["event"]))][-WINDOW:]
+            self.bar.update(len(infos))
+            return True
+
+        def _on_rollout_end(self) -> None:
+            row = _curve_row(
+                len(self.rows) + 1,
+                int(self.num_timesteps),
+                self.episodes,
+                self.window,
+                time.perf_counter() - self.t0,
+            )
+            self.rows.append(row)
+            with (out / "curve.csv").open("a", encoding="utf-8") as fh:
+                fh.write(",".join(f"{v:.6g}" for v in row) + "\n")
+            if row[4] == row[4]:  # not NaN
+                self.bar.set_postfix({"return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"})
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return _Curve()
+
+
+def train_sb3_ppo(
+    scenario: str,
+    out_dir: str | Path,
+    steps: int,
+    n_envs: int = 1,
+    seed: int = 0,
+    progress: bool = True,
+    command: str = "",
+) -> dict[str, Any]:
+    """Train SB3's PPO (its defaults) on ``scenario``'s Gymnasium environment; returns the
+    summary written to ``train.json``. A folder that holds a finished or partial run is
+    refused (SB3's state cannot be resumed without pickles)."""
+    import gymnasium as gym
+    import stable_baselines3
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    for name, value in (("steps", steps), ("n_envs", n_envs)):
+        if value < 1:
+            raise ConfigError(expect(f"sb3-ppo {name}", "an integer >= 1", value, "raise it"))
+    out = Path(out_dir)
+    if (out / "curve.csv").exists() or (out / "policy.safetensors").exists():
+        raise ConfigError(
+            expect("--out", "a folder without an SB3 run", str(out), "use a new --out")
+        )
+    output_dir(out)
+    register_envs()
+    env_id, kwargs = env_id_for(scenario)
+    gym.spec(env_id)  # an unknown id fails here, before any work
+    torch.set_num_threads(1)
+    venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=kwargs)
+    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0)
+    (out / "curve.csv").write_text(",".join(CURVE_COLUMNS) + "\n", encoding="utf-8")
+    callback = _make_callback(out, steps, progress)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=steps, callback=callback)
+    wall = time.perf_counter() - t0
+    venv.close()
+    rows = callback.rows
+    last = rows[-1] if rows else [np.nan] * len(CURVE_COLUMNS)
+    hyper = {
+        k: getattr(model, k)
+        for k in ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "ent_coef")
+    }
+    summary = {
+        "scenario": scenario,
+        "env_id": env_id,
+        "command": command,
+        "env_steps": int(model.num_timesteps),
+        "episodes": callback.episodes,
+        "wall_time_s": round(wall, 1),
+        "steps_per_s": model.num_timesteps / max(wall, 1e-9),
+        "final": dict(zip(CURVE_COLUMNS[3:7], last[3:7], strict=True)),
+        "sb3": {
+            "version": stable_baselines3.__version__,
+            "algorithm": "PPO",
+            "policy": "MlpPolicy",
+            "n_envs": n_envs,
+            "seed": seed,
+            "learning_rate": float(model.learning_rate)
+            if isinstance(model.learning_rate, float)
+            else "schedule",
+            "clip_range": float(model.clip_range(1.0))
+            if callable(model.clip_range)
+            else float(model.clip_range),
+            **hyper,
+        },
+    }
+    _save_policy(model.policy, out / "policy.safetensors", summary)
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, len(CURVE_COLUMNS))
+    from pioneer.viz.plots import plot_learning_curve
+
+    plot_learning_curve(
+        {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
+        out / "curve.png",
+        title=f"Stable-Baselines3 PPO · {scenario}",
+    )
+    with atomic_path(out / "train.json") as tmp:
+        tmp.write_text(to_json(summary, indent=2) + "\n", encoding="utf-8")
+    return summary
+
+
+def _box(space: Any) -> dict[str, list[float]]:
+    return {"low": space.low.tolist(), "high": space.high.tolist()}
+
+
+def _save_policy(policy: Any, path: Path, info: Mapping[str, Any]) -> None:
+    from safetensors.torch import save
+
+    tensors = {k: v.detach().cpu().contiguous() for k, v in policy.state_dict().items()}
+    config = {
+        "net_arch": policy.net_arch,
+        "activation_fn": policy.activation_fn.__name__,
+        "observation_space": _box(policy.observation_space),
+        "action_space": _box(policy.action_space),
+    }
+    meta = {"format": SB3_FORMAT, "config": json.dumps(config), "info": to_json(dict(info))}
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(save(tensors, metadata=meta))
+
+
+# ------------------------------------------------------------------------------ the policy
+class Sb3Policy:
+    """A PPO policy trained by :func:`train_sb3_ppo`, acting on the 29-D observation alone."""
+
+    def __init__(self, policy: Any, name: str = "sb3-ppo") -> None:
+        self.policy = policy
+        self.name = name
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        """Nothing to reset (a feed-forward policy)."""
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        """The mean action, clipped to the action space (as SB3's ``predict``)."""
+        action, _ = self.policy.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
+        return np.asarray(action, dtype=np.float64).reshape(2)
+
+
+def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-ppo") -> Sb3Policy:
+    """Policy factory: the SB3 policy in ``weights`` (a ``policy.safetensors`` written by
+    ``pioneer train sb3-ppo``; ``{scenario}`` is filled in)."""
+    import gymnasium as gym
+    import torch
+    from safetensors import SafetensorError, safe_open
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    p = Path(weights.format(scenario=scenario) if scenario else weights)
+    fix = "train one with `pioneer train sb3-ppo --out DIR` and pass weights=DIR/policy.safetensors"
+    if not p.is_file():
+        raise DataError(expect("sb3-ppo weights", "an existing file", str(p), fix))
+    try:
+        with safe_open(str(p), framework="pt") as fh:
+            raw = dict(fh.metadata() or {})
+            arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118
+        if raw.get("format") != SB3_FORMAT:
+            raise DataError(expect(f"{p}: format", SB3_FORMAT, raw.get("format"), fix))
+        cfg = json.loads(raw["config"])
+        spaces = [
+            gym.spaces.Box(
+                np.array(cfg[k]["low"], dtype=np.float32),
+                np.array(cfg[k]["high"], dtype=np.float32),
+            )
+            for k in ("observation_space", "action_space")
+        ]
+        policy = ActorCriticPolicy(
+            spaces[0],
+            spaces[1],
+            lr_schedule=lambda _: 0.0,
+            net_arch=cfg["net_arch"],
+            activation_fn=getattr(torch.nn, cfg["activation_fn"]),
+        )
+        policy.load_state_dict(arrays, strict=True)
+    except (SafetensorError, OSError, ValueError, KeyError, TypeError, RuntimeError) as exc:
+        raise DataError(expect(f"sb3-ppo weights {p}", "a policy file", f"{exc}", fix)) from exc
+    policy.set_training_mode(False)
+    torch.set_num_threads(1)
+    return Sb3Policy(policy, name=name)
