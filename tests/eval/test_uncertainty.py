@@ -24,7 +24,7 @@ from pioneer.eval.harness import EPISODES_FILE, PolicySpec, episode_seed, evalua
 from pioneer.eval.metrics import summarize
 from pioneer.eval.uncertainty import PAPER_TABLE_IV, frame_arrays, safe_risky, table_iv_markdown
 from pioneer.learn import MDN, StudentPolicy, make_student_policy, save_student
-from pioneer.sim.scenarios import static_study_scenario
+from pioneer.sim.scenarios import get_scenario, static_study_scenario
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message
 
@@ -158,7 +158,9 @@ def test_frames_without_uncertainty_are_dropped():
     got = safe_risky([_rec([0.1, 2.0], [None, math.nan], [None, math.nan])])
     assert (got["frames_safe"], got["frames_risky"]) == (0, 0)
     assert all(
-        math.isnan(got[k]) for k in got if k not in ("threshold_m", "frames_safe", "frames_risky")
+        math.isnan(got[k])
+        for k in got
+        if k not in ("threshold_m", "measure", "frames_safe", "frames_risky")
     )
     arrays = frame_arrays([_rec([None, 0.5], [None, 0.1], [0.2, None])])
     np.testing.assert_array_equal(arrays["clearance"], [math.inf, 0.5])
@@ -180,6 +182,25 @@ def test_unequal_series_are_a_data_error(short):
     with pytest.raises(DataError) as err:
         safe_risky([rec])
     assert_house_message(str(err.value), "frames", "17")
+
+
+def test_the_surface_measure_thresholds_the_surface_series():
+    # the paper's clearance (centre → surface) is the gap + r_r: a 0.6 m gap is risky there
+    rec = _rec([0.6, 1.2], [0.4, 0.1], [0.5, 0.2])
+    rec["frames"]["surface"] = [0.9, 1.5]  # r_r = 0.3 m
+    assert safe_risky([rec], 0.8)["frames_risky"] == 1  # by the gap
+    by_surface = safe_risky([rec], 0.8, "surface")
+    assert by_surface["frames_risky"] == 0 and by_surface["measure"] == "surface"
+    assert safe_risky([rec], 0.9, "surface")["frames_risky"] == 1
+    np.testing.assert_array_equal(frame_arrays([rec], "surface")["clearance"], [0.9, 1.5])
+
+
+def test_records_without_the_asked_series_are_one_data_error():
+    with pytest.raises(DataError) as err:
+        safe_risky([_rec([0.5], [0.1], [0.1])], 0.8, "surface")
+    assert_house_message(str(err.value), "'surface' series", "new --out")
+    with pytest.raises(DataError):
+        frame_arrays([], "nope")
 
 
 # ------------------------------------------------------------------------------ table IV
@@ -242,10 +263,12 @@ def _student(ckpt: Path) -> StudentPolicy:
 def test_run_episode_records_one_frame_per_step(ckpt):
     pol = _student(ckpt)
     rec, _ = run_episode("hr-rl", pol, seed=4)
-    assert rec.frames is not None and set(rec.frames) == set(KEYS)
+    assert rec.frames is not None and set(rec.frames) == {*KEYS, "surface"}
     assert all(len(v) == rec.steps for v in rec.frames.values())
     _, info = NavEnv("hr-rl").reset(seed=4)
     assert rec.frames["clearance"][0] == info["min_clearance"]  # the state of the first decision
+    r_r = get_scenario("hr-rl").sim.robot.radius
+    assert rec.frames["surface"] == [c + r_r for c in rec.frames["clearance"]]
     assert rec.frames["aleatoric"] == [a for a, _ in pol.uncertainty]
     assert rec.frames["epistemic"] == [e for _, e in pol.uncertainty]
 
@@ -301,7 +324,7 @@ def test_records_keep_frames_through_the_harness(ckpt, tmp_path):
     assert back == json.loads(json.dumps(recs))
     by_policy = {p: [r for r in back if r["policy"] == p] for p in ("student-mdn", "goal")}
     for r in by_policy["student-mdn"]:
-        assert set(r["frames"]) == set(KEYS)
+        assert set(r["frames"]) == {*KEYS, "surface"}
         assert all(len(v) == r["steps"] for v in r["frames"].values())
         _, info = NavEnv("hr-rl").reset(seed=episode_seed("hr-rl", 0, r["trial"]))
         assert r["frames"]["clearance"][0] == float(f"{info['min_clearance']:.6g}")

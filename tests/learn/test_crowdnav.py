@@ -307,7 +307,21 @@ def test_policy_is_deterministic_and_registered():
 
 def test_shipped_weights_in_spawned_harness(tmp_path):
     for sc in ("hr-rl", "hl-rr"):
-        assert read_crowdnav_meta(shipped_weights(sc))["info"]["scenario"] == sc
+        pure = read_crowdnav_meta(shipped_weights(sc))["info"]
+        assert pure["scenario"] == sc
+        # the crowdnav++ row is pure PPO (the original's recipe)
+        assert "warm_start" not in pure and pure["ppo"]["lr"] == 4e-5
+        # the imitation warm start ships for the compact world only (no independent expert
+        # succeeds in the paper world), under its own row name
+        warm = read_crowdnav_meta(shipped_weights(f"{sc}-compact", "il"))["info"]
+        assert warm["warm_start"]["expert"] == "sfm"
+        with pytest.raises(DataError, match=f"crowdnav-{sc}-compact"):
+            shipped_weights(f"{sc}-compact")
+        with pytest.raises(DataError, match=f"crowdnav-il-{sc}"):
+            shipped_weights(sc, "il")
+    assert build_policy("crowdnav++-il", "hl-rr-compact").name == "crowdnav++-il"
+    with pytest.raises(DataError, match="variant"):
+        shipped_weights("hr-rl", "bogus")
     recs = evaluate(
         ["hr-rl"], [PolicySpec.make("crowdnav++")], 1, 2, tmp_path, workers=2, progress=False
     )

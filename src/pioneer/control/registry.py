@@ -130,9 +130,18 @@ _BUILTINS = (
     _builtin(
         "crowdnav++",
         "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
-        "CrowdNav++ GRU-attention PPO policy",
+        "CrowdNav++ GRU-attention policy, pure PPO (the original's recipe)",
         check=f"{_PARTS}:crowdnav",
         extra="learn",
+    ),
+    _builtin(
+        "crowdnav++-il",
+        "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
+        "CrowdNav++ warm-started by imitation of sfm, then PPO",
+        check=f"{_PARTS}:crowdnav",
+        extra="learn",
+        variant="il",
+        name="crowdnav++-il",
     ),
     _builtin(
         "sb3-ppo",

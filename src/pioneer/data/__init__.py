@@ -6,7 +6,10 @@ from pathlib import Path
 
 from pioneer.errors import DataError, expect
 
-__all__ = ["base_scenario", "shipped_crowdnav_weights", "shipped_demos", "shipped_student"]
+__all__ = [
+    "CROWDNAV_VARIANTS",
+    "base_scenario",
+    "shipped_crowdnav_weights", "shipped_demos", "shipped_student"]
 
 DEMOS_DIR = Path(__file__).parent / "demos"
 STUDENTS_DIR = Path(__file__).parent / "students"
@@ -55,19 +58,27 @@ def shipped_student(scenario: str, kind: str = "mdn") -> Path:
     return p
 
 
-def shipped_crowdnav_weights(scenario: str) -> Path:
-    """Path of the shipped CrowdNav++ weights for ``scenario`` (``baselines/crowdnav-NAME``)."""
-    name = base_scenario(scenario)
-    p = BASELINES_DIR / f"crowdnav-{name}.safetensors"
-    if not p.is_file():
-        names = sorted(
-            q.stem.removeprefix("crowdnav-") for q in BASELINES_DIR.glob("*.safetensors")
+CROWDNAV_VARIANTS = {"ppo": "crowdnav", "il": "crowdnav-il"}  # variant → file-name prefix
+
+
+def shipped_crowdnav_weights(scenario: str, variant: str = "ppo") -> Path:
+    """Path of the shipped CrowdNav++ weights for ``scenario``: ``variant`` "ppo" (pure PPO, the
+    original's recipe: ``baselines/crowdnav-NAME``) or "il" (imitation warm start + PPO:
+    ``baselines/crowdnav-il-NAME``)."""
+    if variant not in CROWDNAV_VARIANTS:
+        raise DataError(
+            expect("CrowdNav++ variant", f"one of {sorted(CROWDNAV_VARIANTS)}", variant, "pick one")
         )
+    prefix = CROWDNAV_VARIANTS[variant]
+    name = base_scenario(scenario)
+    p = BASELINES_DIR / f"{prefix}-{name}.safetensors"
+    if not p.is_file():
+        names = sorted(q.stem for q in BASELINES_DIR.glob("*.safetensors"))
         raise DataError(
             expect(
                 "CrowdNav++ shipped weights",
-                f"a scenario among {names}",
-                scenario,
+                f"one of {names}",
+                f"{prefix}-{name}",
                 f"train them (pioneer train crowdnav++ --scenario {scenario} --out DIR) and "
                 "pass weights=DIR/policy.safetensors",
             )

@@ -38,4 +38,4 @@ def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:
 def crowdnav(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``weights`` CrowdNav++ loads the scenario's shipped weights."""
     if not kwargs.get("weights"):
-        shipped_crowdnav_weights(scenario)
+        shipped_crowdnav_weights(scenario, str(kwargs.get("variant", "ppo")))

@@ -75,13 +75,18 @@ def _compact(x: float) -> float | None:
     return float(f"{x:.6g}") if math.isfinite(x) else None
 
 
-def _frame_series(policy: Policy, clearance: list[float]) -> dict[str, list[float]] | None:
-    """The per-frame series of a policy that reports ``uncertainty`` (one pair per step)."""
+def _frame_series(
+    policy: Policy, clearance: list[float], robot_radius: float
+) -> dict[str, list[float]] | None:
+    """The per-frame series of a policy that reports ``uncertainty`` (one pair per step):
+    ``clearance`` is the surface gap (SPEC 1.3), ``surface`` the distance from the robot's
+    centre to the nearest human's surface (the paper's "clearance", what d₁ measures)."""
     unc = getattr(policy, "uncertainty", None)
     if unc is None or len(unc) != len(clearance):
         return None
     out = {
         "clearance": clearance,
+        "surface": [c + robot_radius for c in clearance],
         "aleatoric": [float(a) for a, _ in unc],
         "epistemic": [float(e) for _, e in unc],
     }
@@ -137,6 +142,6 @@ def run_episode(
         steps=steps,
         collided_with=_hit(info) if event == "collision" else None,
         min_wall_clearance_m=wall_min,
-        frames=_frame_series(policy, decision_clearance),
+        frames=_frame_series(policy, decision_clearance, env.scenario.sim.robot.radius),
     )
     return rec, (Trajectory(env.world, states) if record else None)

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from pioneer.errors import DataError, expect
 from pioneer.stats import auroc
 
-__all__ = ["PAPER_TABLE_IV", "frame_arrays", "safe_risky", "table_iv_markdown"]
+__all__ = ["MEASURES", "PAPER_TABLE_IV", "frame_arrays", "safe_risky", "table_iv_markdown"]
 
 # Paper Table IV: (safe epistemic, safe aleatoric, risky epistemic, risky aleatoric) and the
 # frame counts (safe, risky) quoted in §V-B.2.
@@ -44,38 +44,59 @@ PAPER_TABLE_IV: dict[str, dict[str, float]] = {
 }
 
 
-def frame_arrays(records: Iterable[Mapping[str, Any]]) -> dict[str, NDArray[np.float64]]:
+MEASURES = ("clearance", "surface")  # the frame series a risky threshold can apply to
+
+
+def frame_arrays(
+    records: Iterable[Mapping[str, Any]], measure: str = "clearance"
+) -> dict[str, NDArray[np.float64]]:
     """Concatenate the per-frame series of ``records`` (those without frames are skipped);
-    ``None`` (no human in range / not reported) becomes ``inf`` for clearance, NaN otherwise."""
+    ``None`` (no human in range / not reported) becomes ``inf`` for clearance, NaN otherwise.
+
+    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap of
+    SPEC 1.3) or ``surface`` (robot centre → nearest human surface, the paper's clearance)."""
+    if measure not in MEASURES:
+        raise DataError(expect("clearance measure", f"one of {MEASURES}", measure, "pick one"))
     cols: dict[str, list[float]] = {"clearance": [], "aleatoric": [], "epistemic": []}
     for rec in records:
         fr = rec.get("frames")
         if not fr:
             continue
-        n = len(fr["clearance"])
+        if measure not in fr:
+            raise DataError(
+                expect(
+                    "record frames",
+                    f"a {measure!r} series",
+                    sorted(fr),
+                    "re-run the evaluation into a new --out (older records lack it)",
+                )
+            )
+        n = len(fr[measure])
         if not len(fr["aleatoric"]) == len(fr["epistemic"]) == n:
             raise DataError(
                 expect("record frames", "equally long series", rec.get("seed"), "re-run it")
             )
-        for key, missing in (
-            ("clearance", math.inf),
-            ("aleatoric", math.nan),
-            ("epistemic", math.nan),
+        for key, src, missing in (
+            ("clearance", measure, math.inf),
+            ("aleatoric", "aleatoric", math.nan),
+            ("epistemic", "epistemic", math.nan),
         ):
-            cols[key].extend(missing if x is None else float(x) for x in fr[key])
+            cols[key].extend(missing if x is None else float(x) for x in fr[src])
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
 def safe_risky(
-    records: Iterable[Mapping[str, Any]], threshold: float = 0.8
-) -> dict[str, float | int]:
-    """Counts, mean uncertainties per class and AUROCs for the frames of ``records``."""
-    fr = frame_arrays(records)
+    records: Iterable[Mapping[str, Any]], threshold: float = 0.8, measure: str = "clearance"
+) -> dict[str, Any]:
+    """Counts, mean uncertainties per class and AUROCs for the frames of ``records``; a frame
+    is risky when its ``measure`` (see :func:`frame_arrays`) is ≤ ``threshold``."""
+    fr = frame_arrays(records, measure)
     ok = np.isfinite(fr["aleatoric"]) & np.isfinite(fr["epistemic"])
     clear, ale, epi = fr["clearance"][ok], fr["aleatoric"][ok], fr["epistemic"][ok]
     risky = clear <= threshold
-    out: dict[str, float | int] = {
+    out: dict[str, Any] = {
         "threshold_m": threshold,
+        "measure": measure,
         "frames_safe": int((~risky).sum()),
         "frames_risky": int(risky.sum()),
     }
@@ -97,7 +118,7 @@ def table_iv_markdown(results: Mapping[str, Mapping[str, Any]], scenarios: Seque
     """Table IV laid out like the paper's (Epi., Ale. per class), ours beside the paper's,
     plus frame counts and AUROCs."""
     lines = [
-        "| Scenario | | risky if clearance ≤ | Safe Epi. | Safe Ale. | Risky Epi. | Risky Ale. "
+        "| Scenario | | risky if centre → surface ≤ | Safe Epi. | Safe Ale. | Risky Epi. | Risky Ale. "
         "| frames safe / risky | AUROC epi. | AUROC ale. |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]

@@ -47,7 +47,7 @@ SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
-BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: the shipped PPO weights)
+BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
 
 # Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
@@ -61,6 +61,7 @@ EPISODE_S = {
     "teacher-no-obstacle": 1.29,
     "cvar-bf": 1.12,
     "crowdnav++": 0.06,
+    "crowdnav++-il": 0.06,
     "dwa": 0.07,
     "sfm": 0.014,
     "goal": 0.009,
@@ -184,8 +185,9 @@ def _announce(
 
 def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
     """Safe/risky uncertainty analysis of the MDN student: ``uncertainty.json``, the histogram
-    figure, and Table IV as Markdown (at the SPEC's 0.8 m and at the clearance quantile that
-    gives the paper's risky share — our lobby is narrower than the paper's, see docs)."""
+    figure, and Table IV as Markdown. A frame is risky when the distance from the robot's
+    centre to the nearest human's surface (the paper's clearance, what d₁ measures) is ≤ 0.8 m;
+    beside it, the threshold at the quantile that gives the paper's risky share."""
     from pioneer.eval.uncertainty import (
         PAPER_TABLE_IV,
         frame_arrays,
@@ -199,18 +201,18 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
     hist: dict[str, dict[str, Any]] = {}
     for sc in SCENARIOS:
         recs = [r for r in records if r["scenario"] == sc and r["policy"] == "student-mdn"]
-        fr = frame_arrays(recs)
+        fr = frame_arrays(recs, "surface")
         if fr["clearance"].size == 0:
             continue
-        results[sc] = safe_risky(recs, 0.8)
+        results[sc] = safe_risky(recs, 0.8, "surface")
         p = PAPER_TABLE_IV[sc]
         share = p["frames_risky"] / (p["frames_risky"] + p["frames_safe"])
         finite = fr["clearance"][np.isfinite(fr["clearance"])]
         thr = float(np.quantile(finite, share)) if finite.size else 0.8
-        matched[sc] = safe_risky(recs, thr)
+        matched[sc] = safe_risky(recs, thr, "surface")
         risky = fr["clearance"] <= thr
         for name in ("aleatoric", "epistemic"):
-            hist[f"{sc} {name} (risky: clearance ≤ {thr:.2f} m)"] = {
+            hist[f"{sc} {name} (risky: centre → surface ≤ {thr:.2f} m)"] = {
                 "safe": fr[name][~risky],
                 "risky": fr[name][risky],
             }
@@ -224,9 +226,10 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         hist, out / "figures" / "uncertainty_safe_risky.png", "MDN student: safe vs risky frames"
     )
     return (
-        "\n### Table IV — MDN uncertainty, safe vs risky frames (clearance > 0.8 m = safe)\n\n"
+        "\n### Table IV — MDN uncertainty, safe vs risky frames (safe: robot centre → nearest "
+        "human surface > 0.8 m)\n\n"
         + table_iv_markdown(results, SCENARIOS)
-        + "\nSame analysis with the risky threshold at the clearance quantile that gives the "
+        + "\nSame analysis with the risky threshold at the quantile that gives the "
         "paper's risky share (8.1 % HR-RL, 4.6 % HL-RR):\n\n"
         + table_iv_markdown(matched, SCENARIOS)
         + "\n![uncertainty histograms](figures/uncertainty_safe_risky.png)\n"

@@ -72,8 +72,11 @@ def make_crowdnav_policy(
     scenario: str | None = None,
     name: str = "crowdnav++",
     torch_threads: Annotated[int, Ge(1)] | None = 1,
+    variant: str = "ppo",
 ) -> CrowdNavPolicy:
-    """Policy factory: ``weights`` (``{scenario}`` filled in) or the shipped file for ``scenario``.
+    """Policy factory: ``weights`` (``{scenario}`` filled in) or the shipped file for ``scenario``
+    (``variant`` "ppo": pure PPO, the ``crowdnav++`` row; "il": imitation warm start + PPO, the
+    ``crowdnav++-il`` row).
 
     ``torch_threads`` sets torch's intra-op threads of this process (1: a batch-1 step gains
     nothing from threads and evaluation runs one worker per core); ``None`` leaves it.
@@ -83,7 +86,7 @@ def make_crowdnav_policy(
             raise ConfigError(
                 expect("crowdnav++", "weights=FILE or a scenario", None, "pass scenario='hr-rl'")
             )
-        path = shipped_crowdnav_weights(scenario)
+        path = shipped_crowdnav_weights(scenario, variant)
     else:
         path = Path(str(weights).format(scenario=scenario) if scenario else str(weights))
     if torch_threads is not None:
