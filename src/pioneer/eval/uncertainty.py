@@ -118,8 +118,8 @@ def table_iv_markdown(results: Mapping[str, Mapping[str, Any]], scenarios: Seque
     """Table IV laid out like the paper's (Epi., Ale. per class), ours beside the paper's,
     plus frame counts and AUROCs."""
     lines = [
-        "| Scenario | | risky if centre → surface ≤ | Safe Epi. | Safe Ale. | Risky Epi. | Risky Ale. "
-        "| frames safe / risky | AUROC epi. | AUROC ale. |",
+        "| Scenario | | risky if centre → surface ≤ | Safe Epi. | Safe Ale. | Risky Epi. "
+        "| Risky Ale. | frames safe / risky | AUROC epi. | AUROC ale. |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for sc in scenarios:
