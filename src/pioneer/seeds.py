@@ -5,8 +5,8 @@
 - **validation** (``validation_seed``): every choice and every tuning — the world's free
   parameters (``pioneer calibrate``), thresholds, mode vs mixture mean; values in
   [2³², 2³³), so never an evaluation episode.
-- **training** (``training_seed``): demonstrations (and, from the next re-training on,
-  DAgger rollouts); values in [2³³, 2³⁴).
+- **training**: demonstrations (``training_seed``: values in [2³³, 2³³ + 2³²)) and DAgger
+  rollouts (``dagger_seed``: values in [2³³ + 2³², 2³⁴)).
 
 Each seed seeds one episode (``env.reset(seed=...)``) and the policy's own generator.
 """
@@ -18,8 +18,10 @@ import zlib
 import numpy as np
 
 __all__ = [
+    "DAGGER_BASE",
     "TRAINING_BASE",
     "VALIDATION_BASE",
+    "dagger_seed",
     "evaluation_seed",
     "training_seed",
     "validation_seed",
@@ -27,6 +29,7 @@ __all__ = [
 
 VALIDATION_BASE = 2**32  # validation seeds live in [2³², 2³³)
 TRAINING_BASE = 2**33  # training seeds live in [2³³, 2³⁴)
+DAGGER_BASE = 2**33 + 2**32  # DAgger's hashed half of the training range
 
 
 def _hash32(*parts: int | str) -> int:
@@ -48,3 +51,10 @@ def training_seed(offset: int, k: int) -> int:
     """The ``k``-th training episode of a stream starting at ``offset`` (demonstrations use
     ``seed`` for positives and ``seed + 100000`` for negatives)."""
     return TRAINING_BASE + int(offset) + int(k)
+
+
+def dagger_seed(scenario: str, seed: int, rnd: int, episode: int) -> int:
+    """The environment seed of ``episode`` in DAgger round ``rnd`` of a run seeded ``seed``:
+    a training seed in [2³³ + 2³², 2³⁴), so never an evaluation, validation or demonstration
+    episode."""
+    return DAGGER_BASE + _hash32("dagger", scenario, seed, rnd, episode)

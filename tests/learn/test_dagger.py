@@ -32,7 +32,8 @@ from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
-from pioneer.learn.dagger import DaggerConfig, DaggerResult, dagger_seed, run_dagger
+from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger
+from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
 from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
 from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.world import SimConfig
@@ -344,7 +345,9 @@ def test_dagger_seeds_are_deterministic_and_disjoint_from_evaluation_seeds():
         }
         evaluation = {episode_seed(scenario, s, t) for s in range(3) for t in range(80)}
         assert not train & evaluation
-        assert all(0 <= x < 2**32 for x in train)
+        # training seeds, in DAgger's half of the range: above every demonstration seed
+        assert all(DAGGER_BASE <= x < 2 * TRAINING_BASE for x in train)
+        assert training_seed(100_000, 10**6) < DAGGER_BASE  # demos: seed, seed + 100,000
     assert dagger_seed("hr-rl", 0, 0, 0) != dagger_seed("hl-rr", 0, 0, 0)
     assert dagger_seed("hr-rl", 0, 1, 0) != dagger_seed("hr-rl", 0, 0, 1)
 

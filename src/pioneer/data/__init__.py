@@ -9,7 +9,10 @@ from pioneer.errors import DataError, expect
 __all__ = [
     "CROWDNAV_VARIANTS",
     "base_scenario",
-    "shipped_crowdnav_weights", "shipped_demos", "shipped_student"]
+    "shipped_crowdnav_weights",
+    "shipped_demos",
+    "shipped_student",
+]
 
 DEMOS_DIR = Path(__file__).parent / "demos"
 STUDENTS_DIR = Path(__file__).parent / "students"

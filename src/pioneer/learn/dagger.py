@@ -18,8 +18,8 @@ Output directory (everything written atomically; a rerun of the same command res
     DIR/curves.csv, DIR/curves.png       loss and student success per round
     DIR/student.safetensors              the final student (= last round's)
 
-Episode seeds come from their own seed sequence (``"dagger"``, scenario, seed, round,
-episode), disjoint from the evaluation seeds of :func:`pioneer.eval.harness.episode_seed`.
+Episode seeds are training seeds (:func:`pioneer.seeds.dagger_seed` of scenario, seed, round,
+episode), disjoint by construction from evaluation, validation and demonstration seeds.
 
 Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds go on
 from the previous weights for ``epochs_per_round`` epochs over the whole aggregate (warm start).
@@ -34,7 +34,6 @@ import io
 import json
 import math
 import os
-import zlib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -60,8 +59,9 @@ from pioneer.learn.models import (
     train_student,
 )
 from pioneer.parallel import bounded_map, spawn_pool
+from pioneer.seeds import dagger_seed
 
-__all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "dagger_seed", "run_dagger"]
+__all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger"]
 
 CONFIG_FILE = "config.json"
 SCENARIO_FILE = "scenario.json"
@@ -135,14 +135,6 @@ class DaggerResult:
     out: Path
     student: Path
     curves: list[dict[str, Any]]
-
-
-def dagger_seed(scenario: str, seed: int, rnd: int, episode: int) -> int:
-    """The environment seed of ``episode`` in round ``rnd`` (disjoint from evaluation seeds)."""
-    ss = np.random.SeedSequence(
-        [zlib.crc32(b"dagger"), zlib.crc32(scenario.encode()), seed, rnd, episode]
-    )
-    return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
 # ------------------------------------------------------------------------------ worker side
