@@ -153,8 +153,9 @@ def bench_dagger_run(plan: Plan) -> Result:
             "episodes": 550,
             "workers": 2,
             "last_round": curves[-1],
-            # the shipped student was made by this very command: a fresh run matches it bit for
-            # bit on a CPU where torch picks the same kernels (compare the two capabilities)
+            # when the shipped student was made by this very command, a fresh run matches it bit
+            # for bit on a CPU where torch picks the same kernels (compare the capabilities);
+            # the students shipped now are the compact world's (data/students/README.md)
             "same_weights_as_shipped": same,
             "torch_cpu_capability": capability,
         },
