@@ -70,7 +70,8 @@ def test_bad_arguments_are_refused() -> None:
 
 
 def test_one_reward_spin_term_charges_the_heading_change() -> None:
-    """The spin term is spin · (ω Δt)² (the original's per-step rotation); the environment's
+    """The spin term is spin · (ω Δt)² (the original's per-step rotation), rescaled by T/Δt so
+    that a second of turning costs what it costs at the original's step T; the environment's
     total equals the reward function's."""
     cfg = get_scenario("hr-rl")
     world = cfg.world()
@@ -79,7 +80,12 @@ def test_one_reward_spin_term_charges_the_heading_change() -> None:
     rc = CrowdNavRewardConfig()
     terms, total, event = crowdnav_reward_terms(world, s0, s1, rc)
     w = float(s1.command[0, 1])
-    assert terms["spin"][0] == pytest.approx(rc.spin * (w * cfg.sim.dt) ** 2)
+    dt, t_ref = cfg.sim.dt, rc.reference_dt
+    assert terms["spin"][0] == pytest.approx(rc.spin * (w * dt) ** 2 * t_ref / dt)
+    # a second of turning at ω: 1/Δt steps here, 1/T steps of (ω T)² there
+    assert terms["spin"][0] / dt == pytest.approx(rc.spin * (w * t_ref) ** 2 / t_ref)
+    per_step = crowdnav_reward_terms(world, s0, s1, CrowdNavRewardConfig(reference_dt=None))[0]
+    assert per_step["spin"][0] == pytest.approx(rc.spin * (w * dt) ** 2)
     env = NavEnv("hr-rl")
     env.reset(options={"state": s0})
     _, r, *_ = env.step([0.3, 0.5])

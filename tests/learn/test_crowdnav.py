@@ -224,13 +224,16 @@ def test_reward_terms():
     s1.clearance[:] = 1.25
     r, _ = crowdnav_reward(world, s1, s1, rc)
     # k = 1: 2.15 − 0.6 = 1.55 m (clear); k = 2: 0.95 m (clear, > 0.9); k = 3: 0.35 m (hit).
-    assert r[0] == pytest.approx(-20.0 / 2**4)
+    # Charged per 0.25 s step in the original: × Δt/T = 0.1/0.25 per 0.1 s step here.
+    assert r[0] == pytest.approx(-20.0 / 2**4 * 0.4)
+    r_step, _ = crowdnav_reward(world, s1, s1, RewardConfig(reference_dt=None))
+    assert r_step[0] == pytest.approx(-20.0 / 2**4)
     # Discomfort replaces the potential; spin on the heading change of the step.
     s1.clearance[:] = 0.05
     s1.h_pos[:] = (9.0, 9.0)
     s1.command[:] = (0.0, 0.5)
     r, _ = crowdnav_reward(world, s1, s1, rc)
-    assert r[0] == pytest.approx((0.05 - 0.25) * 10 * 0.1 - 4.5 * 0.05**2)
+    assert r[0] == pytest.approx((0.05 - 0.25) * 10 * 0.1 - 4.5 * 0.05**2 / 0.4)
     # Collision and success end the episode with their constants.
     s0 = make_state((0.0, 0.0, 0.0), goal=(0.2, 0.0), humans=[{"pos": (0.0, 10.0)}])
     s1 = step(world, s0, [0.3, 0.0])

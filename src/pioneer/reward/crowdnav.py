@@ -11,7 +11,11 @@ the CrowdNav++ baseline is trained on, and the Gymnasium environments' own rewar
       − 2 |v| if v < 0                       reversing (inert here: our v_min = 0)
 
 d is the swept clearance over the step (``State.clearance``) and Δt our 0.1 s; the intrusion
-term is charged on non-terminal steps. The spin term charges the heading change of the step,
+term is charged on non-terminal steps. The original steps every T = 0.25 s; the per-step terms
+(intrusion, spin, reversing) are rescaled to our Δt so that a second of them costs what it
+costs there: intrusion and reversing × Δt/T, spin × T/Δt (Δθ² shrinks with Δt²). Without it a
+second near a person costs 2.5× the original's (−50 instead of −20 at k = 1), more than a
+collision, and pure PPO learned to end its episodes by colliding (docs/baselines.md). The spin term charges the heading change of the step,
 as the original's unicycle action is a rotation per step (Δθ = ω Δt); an earlier copy in the
 environment charged ω² Δt, 10× more at Δt = 0.1 s (docs/architecture.md).
 """
@@ -24,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.bounds import Positive
 from pioneer.config import Config
 from pioneer.sim.events import Event, classify
 from pioneer.sim.world import State, World
@@ -47,6 +52,8 @@ class CrowdNavRewardConfig(Config):
     reverse: float = -2.0  # × |v| when v < 0 [s/m]
     n_pred: int = 5  # K, predicted positions per human
     pred_dt: float = 0.25  # [s] Δt_pred between predicted positions
+    # [s] the original's step T: per-step terms are rescaled to Δt (None: charged per step)
+    reference_dt: Positive | None = 0.25
 
 
 class _Parts(NamedTuple):
@@ -78,6 +85,7 @@ def _norm2(d: F64) -> F64:
 def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _Parts:
     sim = world.sim
     dt = sim.dt
+    per_step = dt / rc.reference_dt if rc.reference_dt else 1.0  # T → Δt for per-step terms
     event = classify(prev, new, sim.time_limit)
     collided, reached = event == _COLLISION, event == _SUCCESS
     d0 = _norm2(prev.goal - prev.robot[:, :2])
@@ -95,11 +103,11 @@ def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _
         pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
         dist = _norm2(pred - new.robot[:, None, None, :2])  # (B, N, K)
         hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
-        pen = rc.intrusion / 2.0 ** (np.arange(1, rc.n_pred + 1) + 1)  # (K,)
+        pen = rc.intrusion / 2.0 ** (np.arange(1, rc.n_pred + 1) + 1) * per_step  # (K,)
         intr = np.where(ongoing, np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2)), 0.0)
     v, w = new.command[:, 0], new.command[:, 1]
-    spin = rc.spin * (w * dt) ** 2
-    rev = np.where(v < 0.0, rc.reverse * np.abs(v), 0.0)
+    spin = rc.spin * (w * dt) ** 2 / per_step
+    rev = np.where(v < 0.0, rc.reverse * per_step * np.abs(v), 0.0)
     return _Parts(event, ongoing, close, base, first, intr, spin, rev)
 
 
