@@ -15,9 +15,9 @@ term is charged on non-terminal steps. The original steps every T = 0.25 s; the 
 (intrusion, spin, reversing) are rescaled to our Δt so that a second of them costs what it
 costs there: intrusion and reversing × Δt/T, spin × T/Δt (Δθ² shrinks with Δt²). Without it a
 second near a person costs 2.5× the original's (−50 instead of −20 at k = 1), more than a
-collision, and pure PPO learned to end its episodes by colliding (docs/baselines.md). The spin term charges the heading change of the step,
-as the original's unicycle action is a rotation per step (Δθ = ω Δt); an earlier copy in the
-environment charged ω² Δt, 10× more at Δt = 0.1 s (docs/architecture.md).
+collision, and pure PPO learned to end its episodes by colliding (docs/baselines.md). The spin
+term charges the heading change of the step, as the original's unicycle action is a rotation
+per step (Δθ = ω Δt); an earlier copy in the environment charged ω² Δt (docs/architecture.md).
 """
 
 from __future__ import annotations
