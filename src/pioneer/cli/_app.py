@@ -62,6 +62,9 @@ _TREE = _Group(
             "evaluation:Eval", "evaluate policies: N seeds × M trials, parallel, resumable"
         ),
         "reproduce": _Leaf("evaluation:Reproduce", "the paper's tables and figures (the main job)"),
+        "sample-layouts": _Leaf(
+            "scenarios:SampleLayouts", "draw valid layouts of the randomised elevator world"
+        ),
         "calibrate": _Leaf(
             "scenarios:Calibrate", "world statistics beside the paper's evidence (validation seeds)"
         ),

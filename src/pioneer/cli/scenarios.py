@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Annotated
 
 from pioneer.cli._common import (
     OutDir,
+    OutFile,
     Output,
     Seed,
     Workers,
@@ -24,7 +25,7 @@ from pioneer.io import output_dir
 if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
 
-__all__ = ["Calibrate", "Scenarios"]
+__all__ = ["Calibrate", "SampleLayouts", "Scenarios"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,4 +101,38 @@ class Calibrate:
                 cells.append(f"{key} {st[key]:.3g}{mark}")
             print(f"{name}: " + "; ".join(cells))
         print(f"wrote {Path(self.out) / 'calibration.json'} ({res['elapsed_s']:.0f} s)")
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class SampleLayouts:
+    """Draw valid elevator layouts from the randomised distribution (LayoutDistribution) into
+    a scenario file, for `pioneer --scenarios FILE …` (e.g. the general student)."""
+
+    out: OutFile
+    """scenario file to write (JSON, format pioneer.scenarios/1)"""
+    n: int = 200
+    """layouts to draw"""
+    seed: Seed = 0
+    """seed of the draws"""
+    prefix: str = "general"
+    """variant names: PREFIX-0000, PREFIX-0001, …"""
+
+    def run(self) -> int:
+        """Draw, write the file, print a summary line."""
+        from pioneer.io import atomic_path, to_json
+        from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
+        from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
+
+        dist = LayoutDistribution()
+        variants, rejected = sample_variants(dist, self.n, self.seed, self.prefix)
+        doc = {
+            "format": SCENARIO_FILE_FORMAT,
+            "distribution": {**dist.to_dict(), "seed": self.seed, "rejected_draws": rejected},
+            "scenarios": variants,
+        }
+        with atomic_path(self.out) as tmp:
+            tmp.write_text(to_json(doc, indent=1) + "\n", encoding="utf-8")
+        print(f"{len(variants)} layouts ({rejected} draws could not place their bodies): ", end="")
+        print(self.out)
         return 0

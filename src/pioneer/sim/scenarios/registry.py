@@ -100,11 +100,11 @@ def register_scenario(
                 f"scenario {name!r} factory", "a ScenarioConfig", type(cfg).__name__, "return one"
             )
         )
-    _check_placement(f"scenario {name!r}", cfg)
+    check_placement(f"scenario {name!r}", cfg)
     _register(name, factory, base)
 
 
-def _check_placement(where: str, cfg: ScenarioConfig) -> None:
+def check_placement(where: str, cfg: ScenarioConfig) -> None:
     """Draw the start states of seeds 0–49: a layout too tight for some of them would stop an
     evaluation in the middle (≈ 1 ms per seed when it fits)."""
     for seed in range(PLACEMENT_CHECK_SEEDS):
@@ -239,7 +239,7 @@ def _load_variant(
         cfg = factory()  # build it once: placement errors name the file and variant
     except PioneerError as exc:
         raise ScenarioError(f"{where}: {exc}") from exc
-    _check_placement(where, cfg)
+    check_placement(where, cfg)
     _check_base(where, entry.get("base"))
     return factory, entry.get("base")
 

@@ -1,0 +1,165 @@
+"""A randomised distribution of elevator layouts and human behaviour, for one student that
+drives in many worlds (beyond the paper; docs/student.md, "One student for many worlds").
+
+:class:`LayoutDistribution` holds the ranges (door and lobby size, cabin, number, speed and size
+of the humans, their reaction to the robot, LiDAR noise, which side they board); the start
+regions follow the geometry by the proportions of the paper world (a 4 × 4 m lobby gives
+exactly its regions). :func:`sample_variants` draws ``n`` valid layouts from a seed and
+returns them as scenario-file entries (``pioneer.scenarios/1``, each with the built-in ``base``
+of its side, whose demonstrations give the teacher's reward); a draw that cannot place its
+bodies for the start seeds a scenario file is checked with is redrawn, and counted.
+
+    pioneer scenarios sample --n 200 --seed 0 --out runs/general/layouts.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from pioneer.config import Config
+from pioneer.errors import PioneerError, ScenarioError, expect
+from pioneer.sim.scenarios.layouts import ElevatorLayout, elevator_scenario
+from pioneer.sim.scenarios.registry import check_placement
+from pioneer.sim.world import SimConfig
+
+__all__ = ["LayoutDistribution", "sample_layout", "sample_variants"]
+
+Range = tuple[float, float]
+PAPER_LOBBY = 4.0  # [m] the paper world's lobby width and depth, the proportions' reference
+MAX_DRAWS = 50  # draws per accepted layout before giving up
+
+
+@dataclasses.dataclass(frozen=True)
+class LayoutDistribution(Config):
+    """Uniform ranges of the randomised elevator world (the paper world is inside every one)."""
+
+    lobby_width: Range = (3.5, 5.0)  # [m]
+    lobby_depth: Range = (3.5, 5.0)  # [m]
+    cabin_width: Range = (2.2, 2.8)  # [m]
+    cabin_depth: Range = (2.3, 3.0)  # [m]
+    door_width: Range = (1.4, 2.2)  # [m] (capped by the cabin width)
+    n_boarding: tuple[int, int] = (1, 3)  # humans boarding from the lobby, inclusive
+    n_exiting: tuple[int, int] = (0, 2)  # humans leaving the cabin, inclusive
+    human_radius: Range = (0.3, 0.6)  # [m]
+    v_pref_scale: Range = (0.8, 1.3)  # × the paper's (0.5, 0.6, 0.7) m/s
+    a_robot: Range = (0.0, 2.0)  # [m/s²] the humans' reaction to the robot (0: invisible)
+    reacts_share: float = 0.8  # probability that a group (boarders, exiting) reacts at all
+    lidar_noise: Range = (0.0, 0.03)  # [m] Gaussian range noise σ
+    sides: tuple[str, ...] = ("right", "left")  # "right" → HR-RL, "left" → HL-RR
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name in ("reacts_share", "sides"):
+                continue
+            lo, hi = value
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                raise ScenarioError(
+                    expect(f"LayoutDistribution.{f.name}", "0 <= low <= high", value, "fix it")
+                )
+        if not 0.0 <= self.reacts_share <= 1.0:
+            raise ScenarioError(
+                expect("LayoutDistribution.reacts_share", "in [0, 1]", self.reacts_share, "0.8")
+            )
+        if not self.sides or set(self.sides) - {"right", "left"}:
+            raise ScenarioError(
+                expect("LayoutDistribution.sides", "'right' and/or 'left'", self.sides, "fix it")
+            )
+
+
+def sample_layout(
+    dist: LayoutDistribution, rng: np.random.Generator
+) -> tuple[ElevatorLayout, SimConfig]:
+    """One draw of the distribution (not yet checked for placement)."""
+
+    def u(r: Range) -> float:
+        return round(float(rng.uniform(*r)), 3)
+
+    def k(r: tuple[int, int]) -> int:
+        return int(rng.integers(r[0], r[1] + 1))
+
+    w, d = u(dist.lobby_width), u(dist.lobby_depth)
+    cabin_w = min(u(dist.cabin_width), w)
+    sw, sd = w / PAPER_LOBBY, d / PAPER_LOBBY  # the paper world's proportions
+    n_boarding = k(dist.n_boarding)
+    scale = u(dist.v_pref_scale)
+    layout = ElevatorLayout(
+        human_side=str(rng.choice(list(dist.sides))),
+        cabin_width=cabin_w,
+        cabin_depth=u(dist.cabin_depth),
+        door_width=min(u(dist.door_width), cabin_w),
+        lobby_width=w,
+        lobby_depth=d,
+        n_boarding=n_boarding,
+        n_exiting=k(dist.n_exiting),
+        human_radius=u(dist.human_radius),
+        v_pref_choices=tuple(round(v * scale, 3) for v in (0.5, 0.6, 0.7)),
+        robot_start_y=(round(-2.4 * sd, 3), round(-2.0 * sd, 3)),
+        boarder_x=(round(1.2 * sw, 3), round(1.3 * sw, 3)),
+        # three or more boarders queue in depth: give them the whole back of the lobby
+        boarder_y=(round(-3.8 * sd, 3), round((-3.3 if n_boarding < 3 else -2.7) * sd, 3)),
+        exit_waypoints=((round(1.2 * sw, 3), round(-1.6 * sd, 3)),),
+        boarders_react_to_robot=bool(rng.random() < dist.reacts_share),
+        exiting_react_to_robot=bool(rng.random() < dist.reacts_share),
+    )
+    base = SimConfig()
+    sim = dataclasses.replace(
+        base,
+        social_force=dataclasses.replace(base.social_force, a_robot=u(dist.a_robot)),
+        lidar=dataclasses.replace(base.lidar, noise_std=u(dist.lidar_noise)),
+    )
+    return layout, sim
+
+
+def _changed(cfg: Config, default: Config) -> dict[str, Any]:
+    """The fields of ``cfg`` that differ from ``default`` (nested configs as dicts)."""
+    out: dict[str, Any] = {}
+    mine, ref = cfg.to_dict(), default.to_dict()
+    for key, value in mine.items():
+        if value != ref[key]:
+            out[key] = (
+                {k: v for k, v in value.items() if v != ref[key][k]}
+                if isinstance(value, dict)
+                else value
+            )
+    return out
+
+
+def sample_variants(
+    dist: LayoutDistribution, n: int, seed: int, prefix: str = "general"
+) -> tuple[dict[str, dict[str, Any]], int]:
+    """``n`` valid layouts drawn from ``seed`` as scenario-file entries ``{name: entry}``, and
+    the number of draws rejected because their bodies could not be placed."""
+    if n < 1:
+        raise ScenarioError(expect("layouts to draw", "n >= 1", n, "ask for at least one"))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
+    variants: dict[str, dict[str, Any]] = {}
+    rejected = 0
+    while len(variants) < n:
+        for _ in range(MAX_DRAWS):
+            layout, sim = sample_layout(dist, rng)
+            name = f"{prefix}-{len(variants):04d}"
+            try:
+                check_placement(name, elevator_scenario(layout, sim=sim, name=name))
+            except PioneerError:
+                rejected += 1
+                continue
+            variants[name] = {
+                "elevator": _changed(layout, ElevatorLayout()) | {"human_side": layout.human_side},
+                "sim": _changed(sim, SimConfig()),
+                "base": "hr-rl" if layout.human_side == "right" else "hl-rr",
+            }
+            break
+        else:
+            raise ScenarioError(
+                expect(
+                    "layout distribution",
+                    f"a placeable layout within {MAX_DRAWS} draws",
+                    "none",
+                    "widen the lobby ranges or shrink the humans",
+                )
+            )
+    return variants, rejected

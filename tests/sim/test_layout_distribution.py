@@ -1,0 +1,114 @@
+"""The randomised elevator world of the general student: only valid layouts, within the
+distribution's ranges, reproducible from a seed, usable as a scenario file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pioneer.errors import ScenarioError
+from pioneer.sim.scenarios import (
+    SCENARIO_FILE_FORMAT,
+    ElevatorLayout,
+    elevator_scenario,
+    get_scenario,
+    sample_state,
+)
+from pioneer.sim.scenarios import registry as scenarios
+from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_layout, sample_variants
+from pioneer_testutils import assert_house_message, run_cli
+
+
+@pytest.fixture
+def clean_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(scenarios, "_REGISTRY", dict(scenarios._REGISTRY))
+    monkeypatch.setattr(scenarios, "_BASES", dict(scenarios._BASES))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sampled_layouts_are_valid_scenarios(seed, tmp_path, clean_registry):
+    dist = LayoutDistribution()
+    variants, rejected = sample_variants(dist, 4, seed, prefix=f"gen{seed}")
+    assert len(variants) == 4 and rejected >= 0
+    path = tmp_path / "layouts.json"
+    path.write_text(json.dumps({"format": SCENARIO_FILE_FORMAT, "scenarios": variants}))
+    # the scenario-file loader refuses any variant it cannot build or place
+    assert scenarios.load_scenario_file(path) == list(variants)
+    for name, entry in variants.items():
+        lay = entry["elevator"]
+        assert entry["base"] == {"right": "hr-rl", "left": "hl-rr"}[lay["human_side"]]
+        cfg = get_scenario(name)
+        assert scenarios.scenario_base(name) == entry["base"]
+        for field in ("lobby_width", "lobby_depth", "human_radius", "door_width"):
+            lo, hi = getattr(dist, field)
+            assert lo <= lay.get(field, getattr(ElevatorLayout(), field)) <= hi
+        assert dist.a_robot[0] <= cfg.sim.social_force.a_robot <= dist.a_robot[1]
+        assert dist.lidar_noise[0] <= cfg.sim.lidar.noise_std <= dist.lidar_noise[1]
+        n_humans = len(cfg.humans)
+        assert dist.n_boarding[0] + dist.n_exiting[0] <= n_humans
+        assert n_humans <= dist.n_boarding[1] + dist.n_exiting[1]
+        for s in range(10):  # every start state is collision-free, nobody outside the walls
+            st = sample_state(cfg, np.random.default_rng(1000 + s))
+            assert st.clearance[0] > 0.0 and st.wall_clearance[0] > 0.0
+
+
+def test_the_same_seed_gives_the_same_layouts():
+    a, ra = sample_variants(LayoutDistribution(), 3, 7)
+    b, rb = sample_variants(LayoutDistribution(), 3, 7)
+    assert a == b and ra == rb
+    assert a != sample_variants(LayoutDistribution(), 3, 8)[0]
+
+
+def test_the_paper_world_is_inside_the_distribution():
+    # with the ranges collapsed onto the paper world's values the draw is the paper world
+    dist = LayoutDistribution(
+        lobby_width=(4.0, 4.0),
+        lobby_depth=(4.0, 4.0),
+        cabin_width=(2.5, 2.5),
+        cabin_depth=(2.7, 2.7),
+        door_width=(1.8, 1.8),
+        n_boarding=(2, 2),
+        n_exiting=(1, 1),
+        human_radius=(0.6, 0.6),
+        v_pref_scale=(1.0, 1.0),
+        a_robot=(0.5, 0.5),
+        reacts_share=1.0,
+        lidar_noise=(0.0, 0.0),
+        sides=("right",),
+    )
+    layout, sim = sample_layout(dist, np.random.default_rng(0))
+    assert layout == ElevatorLayout()
+    assert elevator_scenario(layout, sim=sim) == get_scenario("hr-rl")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [
+        ({"lobby_width": (5.0, 3.0)}, "lobby_width"),
+        ({"reacts_share": 1.5}, "reacts_share"),
+        ({"sides": ("up",)}, "sides"),
+    ],
+)
+def test_bad_ranges_are_refused(kwargs, needle):
+    with pytest.raises(ScenarioError) as err:
+        LayoutDistribution(**kwargs)
+    assert_house_message(str(err.value), needle)
+
+
+def test_the_command_writes_a_scenario_file(tmp_path):
+    out = tmp_path / "layouts.json"
+    res = run_cli("sample-layouts", "--n", "2", "--seed", "3", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["format"] == SCENARIO_FILE_FORMAT and list(doc["scenarios"]) == [
+        "general-0000",
+        "general-0001",
+    ]
+    assert doc["distribution"]["seed"] == 3
+    listed = run_cli("--scenarios", str(out), "scenarios")
+    assert listed.returncode == 0 and "general-0001" in listed.stdout
+    bad = run_cli("sample-layouts", "--n", "0", "--out", str(tmp_path / "none.json"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "none.json").exists()
