@@ -32,9 +32,9 @@ from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
-from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger
+from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set
 from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
-from pioneer.sim.scenarios import ScenarioConfig, static_study_scenario
+from pioneer.sim.scenarios import ScenarioConfig, StaticStudyLayout, static_study_scenario
 from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message, interrupted_line, run_cli, stop_cli
@@ -61,6 +61,7 @@ EPISODE_KEYS = {
     "event",
     "time_s",
     "env_seed",
+    "scenario",
 }
 
 
@@ -652,6 +653,45 @@ def test_config_round_trips_and_rejects_unknown_keys():
     with pytest.raises(ConfigError) as err:
         DaggerConfig.from_dict({"round": 3})
     assert_house_message(str(err.value), "round")
+
+
+def test_a_scenario_pattern_draws_each_episode_from_the_matching_variants(
+    tmp_path, reward_file, monkeypatch
+):
+    """One student for many worlds: ``--scenario 'tiny-static-*'`` runs every episode in one
+    of the matching variants (drawn by the episode's seed), records all their definitions,
+    and refuses a resume that sees another set."""
+
+    def variant(width: float, name: str) -> Any:
+        return lambda: dataclasses.replace(
+            static_study_scenario(
+                StaticStudyLayout(width=width), sim=SimConfig(time_limit=TIME_LIMIT)
+            ),
+            name=name,
+        )
+
+    for name, width in (("tiny-static-a", 4.0), ("tiny-static-b", 5.0)):
+        monkeypatch.setitem(scenarios._REGISTRY, name, variant(width, name))
+    assert scenario_set("tiny-static-*") == ["tiny-static-a", "tiny-static-b"]
+    assert scenario_set(TINY) == [TINY]
+    cfg = TINY_CFG.replace(scenario="tiny-static-*", episodes_per_round=3)
+    out = tmp_path / "general"
+    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    pinned = json.loads((out / "scenario.json").read_text())["scenarios"]
+    assert sorted(pinned) == ["tiny-static-a", "tiny-static-b"]
+    used = [str(_load(p)["scenario"]) for p in sorted((out / "rounds").glob("*/ep-*.npz"))]
+    assert len(used) == 2 + 2 * 3 and set(used) == {"tiny-static-a", "tiny-static-b"}
+    for p in sorted((out / "rounds").glob("*/ep-*.npz")):  # the drawn world is the seed's
+        ep = _load(p)
+        names = ["tiny-static-a", "tiny-static-b"]
+        assert str(ep["scenario"]) == names[int(ep["env_seed"]) % 2]
+    monkeypatch.setitem(scenarios._REGISTRY, "tiny-static-c", variant(4.5, "tiny-static-c"))
+    with pytest.raises(ConfigError) as err:
+        run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert_house_message(str(err.value), "scenarios", "3 matching now")
+    with pytest.raises(ConfigError) as err:
+        scenario_set("nothing-*")
+    assert_house_message(str(err.value), "pattern", "--scenarios FILE")
 
 
 def test_unknown_scenario_fails_before_writing_anything(tmp_path):

@@ -54,7 +54,7 @@ class Distill:
     out: OutDir
     """output folder (resumes if it exists)"""
     scenario: str = default(DaggerConfig, "scenario")
-    """hr-rl, hl-rr, …"""
+    """hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)"""
     student: Student = default(DaggerConfig, "student")
     """the student network"""
     action_mode: ActionMode = default(DaggerConfig, "action_mode")

@@ -12,7 +12,8 @@ Output directory (everything written atomically; a rerun of the same command res
 
     DIR/config.json                      the DaggerConfig (a rerun must match it)
     DIR/scenario.json                    the scenario's full config (a rerun must match it)
-    DIR/reward.npz                       the teacher's density reward
+                                         (a pattern such as ``general-*``: every match's)
+    DIR/reward.npz                       the teacher's density reward (a pattern: reward-BASE.npz)
     DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, clearance, …)
     DIR/rounds/round-RR/student.safetensors   the student trained after round RR
     DIR/curves.csv, DIR/curves.png       loss and student success per round
@@ -20,6 +21,10 @@ Output directory (everything written atomically; a rerun of the same command res
 
 Episode seeds are training seeds (:func:`pioneer.seeds.dagger_seed` of scenario, seed, round,
 episode), disjoint by construction from evaluation, validation and demonstration seeds.
+
+``--scenario`` may be a pattern (``general-*``): each episode then runs in one of the matching
+scenarios, drawn by its seed, and the teacher plans with the reward of that scenario's base —
+one student for many worlds (docs/student.md).
 
 Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds go on
 from the previous weights for ``epochs_per_round`` epochs over the whole aggregate (warm start).
@@ -30,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import fnmatch
 import io
 import json
 import math
@@ -49,6 +55,9 @@ from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import kept
 from pioneer.io import atomic_path, load_npz, output_dir, to_json, write_text_atomic
+from pioneer.learn.collect import clear_cache, collect_episode
+from pioneer.learn.collect import collect_task as _collect_task
+from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
     MDN,
     Student,
@@ -61,7 +70,7 @@ from pioneer.learn.models import (
 from pioneer.parallel import bounded_map, spawn_pool
 from pioneer.seeds import dagger_seed
 
-__all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger"]
+__all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
 
 CONFIG_FILE = "config.json"
 SCENARIO_FILE = "scenario.json"
@@ -137,99 +146,6 @@ class DaggerResult:
     curves: list[dict[str, Any]]
 
 
-# ------------------------------------------------------------------------------ worker side
-_CACHE: dict[tuple[str, str], Any] = {}
-
-
-def _teacher(scenario: str, reward: str) -> Any:
-    key = ("teacher", f"{scenario}:{reward}")
-    if key not in _CACHE:
-        from pioneer.control.teacher import make_teacher
-
-        _CACHE[key] = make_teacher(scenario, reward=reward)
-    return _CACHE[key]
-
-
-def _student(checkpoint: str) -> Any:
-    st = os.stat(checkpoint)  # a rewritten file (a recreated run folder) is a new student
-    key = ("student", f"{checkpoint}:{st.st_mtime_ns}:{st.st_size}")
-    if key not in _CACHE:
-        from pioneer.learn.policy import make_student_policy
-
-        for old in [k for k in _CACHE if k[0] == "student"]:  # keep only this round's student
-            del _CACHE[old]
-        _CACHE[key] = make_student_policy(checkpoint)
-    return _CACHE[key]
-
-
-def collect_episode(
-    scenario: str,
-    reward: str,
-    checkpoint: str | None,
-    env_seed: int,
-    label_prev: str = "applied",
-) -> dict[str, Any]:
-    """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
-    teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
-    labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
-    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
-    from pioneer.envs.env import NavEnv
-
-    teacher = _teacher(scenario, reward)
-    student = _student(checkpoint) if checkpoint is not None else None
-    env = NavEnv(scenario)
-    obs, info = env.reset(seed=env_seed)
-    rng = np.random.default_rng(env_seed)
-    teacher.reset(info, rng)
-    if student is not None:
-        student.reset(info, rng)
-    rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
-    event = None
-    while event is None:
-        state = info["state"]
-        prev = state.command[0] if label_prev == "applied" else None  # None: its own last label
-        label = teacher.decide(info["world"], state, prev=prev).command
-        u = label if student is None else student.act(obs, info)
-        rows_obs.append(np.asarray(obs, dtype=np.float32))
-        rows_lab.append(label)
-        rows_app.append(np.asarray(u, dtype=np.float64))
-        rows_clear.append(info["min_clearance"])
-        obs, _, _, _, info = env.step(u)
-        event = info["event"]
-    n = len(rows_obs)
-    unc = (
-        np.asarray(student.uncertainty, dtype=np.float64).reshape(n, 2)
-        if student is not None
-        else np.full((n, 2), np.nan)
-    )
-    return {
-        "obs": np.stack(rows_obs),
-        "action": np.stack(rows_lab).astype(np.float32),
-        "applied": np.stack(rows_app).astype(np.float32),
-        "clearance": np.asarray(rows_clear, dtype=np.float64),
-        "aleatoric": unc[:, 0],
-        "epistemic": unc[:, 1],
-        "event": np.array(event),
-        "time_s": np.array(float(info["time"])),
-        "env_seed": np.array(env_seed, dtype=np.int64),
-    }
-
-
-def _collect_task(args: tuple[str, str, str | None, int, str, str]) -> str:
-    scenario, reward, checkpoint, env_seed, path, label_prev = args
-    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **ep)
-    return path
-
-
-def _worker_init() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1, user_api="blas")
-    torch.set_num_threads(1)
-
-
 # ------------------------------------------------------------------------------ driver
 def _round_dir(out: Path, rnd: int) -> Path:
     return out / "rounds" / f"round-{rnd:02d}"
@@ -285,13 +201,48 @@ def _check_config(out: Path, cfg: DaggerConfig) -> None:
     write_text_atomic(p, to_json(cfg.to_dict(), indent=2) + "\n")
 
 
-def _check_scenario(out: Path, name: str) -> None:
-    """Record the scenario's full definition; a resumed run must see the same one."""
+def scenario_set(pattern: str) -> list[str]:
+    """The scenarios a run draws its episodes from: ``pattern`` itself, or — with ``*``, ``?``
+    or ``[`` in it — every registered scenario whose name matches (e.g. ``general-*`` for the
+    layouts of ``pioneer sample-layouts``), sorted."""
+    from pioneer.sim.scenarios import get_scenario, scenario_names
+
+    if not any(ch in pattern for ch in "*?["):
+        get_scenario(pattern)  # fail early on an unknown scenario
+        return [pattern]
+    names = sorted(n for n in scenario_names() if fnmatch.fnmatchcase(n, pattern))
+    if not names:
+        raise ConfigError(
+            expect(
+                "DAgger --scenario pattern",
+                "a pattern matching registered scenarios",
+                pattern,
+                "load the variants with `pioneer --scenarios FILE distill …`",
+            )
+        )
+    return names
+
+
+def _check_scenario(out: Path, names: list[str]) -> None:
+    """Record the scenarios' full definitions; a resumed run must see the same ones."""
     from pioneer.sim.scenarios import pin_scenario
 
     p = out / SCENARIO_FILE
     recorded = json.loads(p.read_text()) if p.exists() else None
-    mine = pin_scenario(name, recorded, str(out))
+    if len(names) == 1:  # one scenario: its definition (as every run before patterns)
+        mine = pin_scenario(names[0], recorded, str(out))
+    else:
+        old = recorded.get("scenarios", {}) if isinstance(recorded, dict) else {}
+        if recorded is not None and sorted(old) != names:
+            raise ConfigError(
+                expect(
+                    f"{out}: scenarios",
+                    f"the {len(old)} of the run already there",
+                    f"{len(names)} matching now",
+                    "load the same scenario file to resume, or use a new --out directory",
+                )
+            )
+        mine = {"scenarios": {n: pin_scenario(n, old.get(n), str(out)) for n in names}}
     if recorded is None:
         write_text_atomic(p, to_json(mine, indent=1) + "\n")
 
@@ -340,40 +291,50 @@ def _kept(cfg: DaggerConfig, out: Path) -> str:
     return f"{episodes} of {total} episodes and {students} of {rounds} rounds kept in {out}"
 
 
-def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> Path:
-    """Check ``out`` against ``cfg`` (resume) and return the teacher's reward file."""
+def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> dict[str, Path]:
+    """Check ``out`` against ``cfg`` (resume); return the teacher's reward file per scenario:
+    ``reward`` for all, else the one fitted on the shipped demos of the scenario's base
+    (``DIR/reward.npz`` for one scenario, ``DIR/reward-BASE.npz`` for a pattern)."""
+    from pioneer.data import base_scenario
     from pioneer.io import remove_partial_writes
-    from pioneer.sim.scenarios import get_scenario
 
-    get_scenario(cfg.scenario)  # fail early on an unknown scenario
+    names = scenario_set(cfg.scenario)
     remove_partial_writes(output_dir(out) / "rounds")  # a killed worker's half-written episode
     _check_config(out, cfg)
-    _check_scenario(out, cfg.scenario)
-    reward_path = Path(reward) if reward is not None else out / "reward.npz"
-    if reward is None and not reward_path.exists():
-        from pioneer.reward.default import default_reward
+    _check_scenario(out, names)
+    if reward is not None:
+        return dict.fromkeys(names, Path(reward))
+    from pioneer.reward.default import default_reward
 
-        default_reward(cfg.scenario).save(reward_path)
-    return reward_path
+    paths = {}
+    for name in names:
+        base = base_scenario(name)
+        paths[name] = out / ("reward.npz" if len(names) == 1 else f"reward-{base}.npz")
+        if not paths[name].exists():
+            default_reward(base).save(paths[name])
+    return paths
+
+
+def _episode_scenario(cfg: DaggerConfig, names: list[str], rnd: int, i: int) -> str:
+    """The scenario of episode ``i`` of round ``rnd``: drawn from the run's set by its seed."""
+    return names[dagger_seed(cfg.scenario, cfg.seed, rnd, i) % len(names)]
 
 
 def _round_tasks(
-    cfg: DaggerConfig, out: Path, reward_path: Path, rnd: int
+    cfg: DaggerConfig, out: Path, rewards: dict[str, Path], rnd: int
 ) -> list[tuple[str, str, str | None, int, str, str]]:
     """The episodes of round ``rnd`` not yet on disk, as :func:`_collect_task` arguments."""
     prev_ckpt = None if rnd == 0 else str(_round_dir(out, rnd - 1) / FINAL_FILE)
-    return [
-        (
-            cfg.scenario,
-            str(reward_path),
-            prev_ckpt,
-            dagger_seed(cfg.scenario, cfg.seed, rnd, i),
-            str(_episode_path(out, rnd, i)),
-            cfg.label_prev,
-        )
-        for i in range(cfg.episodes_in(rnd))
-        if not _episode_path(out, rnd, i).exists()
-    ]
+    names = sorted(rewards)
+    tasks = []
+    for i in range(cfg.episodes_in(rnd)):
+        if _episode_path(out, rnd, i).exists():
+            continue
+        name = _episode_scenario(cfg, names, rnd, i)
+        seed = dagger_seed(cfg.scenario, cfg.seed, rnd, i)
+        path = str(_episode_path(out, rnd, i))
+        tasks.append((name, str(rewards[name]), prev_ckpt, seed, path, cfg.label_prev))
+    return tasks
 
 
 def _fit_round(
@@ -433,12 +394,12 @@ def run_dagger(
     """
     cfg = config
     out = Path(out_dir)
-    reward_path = _prepare(cfg, out, reward)
+    rewards = _prepare(cfg, out, reward)
     n_workers = workers or os.cpu_count() or 1
     # Train on one thread: float32 sums depend on the thread count, and the weights must not
     # depend on --workers or the machine (the networks are small; threads gain little).
     torch.set_num_threads(1)
-    _CACHE.clear()
+    clear_cache()
     total = cfg.total_episodes
     done, _ = _on_disk(cfg, out)
     curves: list[dict[str, Any]] = []
@@ -449,7 +410,7 @@ def run_dagger(
     with kept(lambda: _kept(cfg, out)), bar, _pool(n_workers) as pool:
         for rnd in range(cfg.rounds + 1):
             bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
-            for _ in _run_parallel(_round_tasks(cfg, out, reward_path, rnd), pool, n_workers):
+            for _ in _run_parallel(_round_tasks(cfg, out, rewards, rnd), pool, n_workers):
                 bar.update(1)
             eps = load_round(out, rnd, cfg.episodes_in(rnd))
             obs = np.concatenate([e["obs"] for e in eps]).astype(np.float32)

@@ -1,0 +1,114 @@
+"""DAgger's worker side: one labelled episode, driven by the teacher or the student, with the
+teacher labelling every step (:func:`collect_episode`); the teacher and the round's student
+are cached per worker process."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+import torch
+
+from pioneer.io import atomic_path
+
+__all__ = ["clear_cache", "collect_episode", "collect_task", "worker_init"]
+
+_CACHE: dict[tuple[str, str], Any] = {}
+
+
+def clear_cache() -> None:
+    """Forget the cached teachers and student (a new run in this process)."""
+    _CACHE.clear()
+
+
+def _teacher(scenario: str, reward: str) -> Any:
+    # One teacher per reward file: it plans from the privileged state and world of each step,
+    # so the variants of a layout distribution that share a reward share the teacher.
+    key = ("teacher", reward)
+    if key not in _CACHE:
+        from pioneer.control.teacher import make_teacher
+
+        _CACHE[key] = make_teacher(scenario, reward=reward)
+    return _CACHE[key]
+
+
+def _student(checkpoint: str) -> Any:
+    st = os.stat(checkpoint)  # a rewritten file (a recreated run folder) is a new student
+    key = ("student", f"{checkpoint}:{st.st_mtime_ns}:{st.st_size}")
+    if key not in _CACHE:
+        from pioneer.learn.policy import make_student_policy
+
+        for old in [k for k in _CACHE if k[0] == "student"]:  # keep only this round's student
+            del _CACHE[old]
+        _CACHE[key] = make_student_policy(checkpoint)
+    return _CACHE[key]
+
+
+def collect_episode(
+    scenario: str,
+    reward: str,
+    checkpoint: str | None,
+    env_seed: int,
+    label_prev: str = "applied",
+) -> dict[str, Any]:
+    """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
+    teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
+    labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
+    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
+    from pioneer.envs.env import NavEnv
+
+    teacher = _teacher(scenario, reward)
+    student = _student(checkpoint) if checkpoint is not None else None
+    env = NavEnv(scenario)
+    obs, info = env.reset(seed=env_seed)
+    rng = np.random.default_rng(env_seed)
+    teacher.reset(info, rng)
+    if student is not None:
+        student.reset(info, rng)
+    rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
+    event = None
+    while event is None:
+        state = info["state"]
+        prev = state.command[0] if label_prev == "applied" else None  # None: its own last label
+        label = teacher.decide(info["world"], state, prev=prev).command
+        u = label if student is None else student.act(obs, info)
+        rows_obs.append(np.asarray(obs, dtype=np.float32))
+        rows_lab.append(label)
+        rows_app.append(np.asarray(u, dtype=np.float64))
+        rows_clear.append(info["min_clearance"])
+        obs, _, _, _, info = env.step(u)
+        event = info["event"]
+    n = len(rows_obs)
+    unc = (
+        np.asarray(student.uncertainty, dtype=np.float64).reshape(n, 2)
+        if student is not None
+        else np.full((n, 2), np.nan)
+    )
+    return {
+        "obs": np.stack(rows_obs),
+        "action": np.stack(rows_lab).astype(np.float32),
+        "applied": np.stack(rows_app).astype(np.float32),
+        "clearance": np.asarray(rows_clear, dtype=np.float64),
+        "aleatoric": unc[:, 0],
+        "epistemic": unc[:, 1],
+        "event": np.array(event),
+        "time_s": np.array(float(info["time"])),
+        "env_seed": np.array(env_seed, dtype=np.int64),
+        "scenario": np.array(scenario),
+    }
+
+
+def collect_task(args: tuple[str, str, str | None, int, str, str]) -> str:
+    scenario, reward, checkpoint, env_seed, path, label_prev = args
+    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **ep)
+    return path
+
+
+def worker_init() -> None:
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+    torch.set_num_threads(1)
