@@ -112,3 +112,26 @@ def test_the_command_writes_a_scenario_file(tmp_path):
     bad = run_cli("sample-layouts", "--n", "0", "--out", str(tmp_path / "none.json"))
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "none.json").exists()
+
+
+def test_the_held_out_layouts_lie_outside_the_training_distribution(clean_registry):
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "held_out_layouts.json"
+    names = scenarios.load_scenario_file(path)
+    assert len(names) == 6
+    dist = LayoutDistribution()
+    entries = json.loads(path.read_text())["scenarios"]
+    for name in names:
+        lay = ElevatorLayout.from_dict(entries[name]["elevator"])
+        sim = get_scenario(name).sim
+        outside = [
+            not dist.lobby_width[0] <= lay.lobby_width <= dist.lobby_width[1],
+            not dist.lobby_depth[0] <= lay.lobby_depth <= dist.lobby_depth[1],
+            not dist.door_width[0] <= lay.door_width <= dist.door_width[1],
+            not dist.n_boarding[0] <= lay.n_boarding <= dist.n_boarding[1],
+            not dist.human_radius[0] <= lay.human_radius <= dist.human_radius[1],
+            not dist.a_robot[0] <= sim.social_force.a_robot <= dist.a_robot[1],
+            not dist.lidar_noise[0] <= sim.lidar.noise_std <= dist.lidar_noise[1],
+        ]
+        assert sum(outside) == 1, name  # exactly one factor outside: a clean held-out test
