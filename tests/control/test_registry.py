@@ -120,3 +120,17 @@ def test_bad_policy_parameter_is_one_cli_line(spec, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("pioneer: error: policy ")
     assert not (tmp_path / "o").exists()
+
+
+def test_the_general_student_serves_every_scenario():
+    from pioneer.data import shipped_student
+    from pioneer.learn import read_checkpoint_meta
+
+    path = shipped_student("anything", "mdn", general=True)
+    assert path.name == "general-mdn.safetensors"
+    info = read_checkpoint_meta(path)["info"]
+    assert info["scenario"] == "general-*" and info["dagger"]["student"] == "mdn"
+    for scenario in ("hr-rl", "hl-rr", "hr-rl-compact"):
+        pol = registry.build_policy("student-general", scenario)
+        assert pol.name == "student-general"
+    registry.check_parts("student-general", "not-a-built-in", {})  # no per-scenario file

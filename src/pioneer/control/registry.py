@@ -168,6 +168,16 @@ _BUILTINS = (
         name="student-mlp",
     ),
     _builtin(
+        "student-general",
+        "pioneer.learn.policy:make_student_policy",
+        "one DAgger MDN student for many elevator layouts (beyond the paper)",
+        check=f"{_PARTS}:student",
+        extra="learn",
+        kind="mdn",
+        general=True,
+        name="student-general",
+    ),
+    _builtin(
         "student-onnx",
         "pioneer.deploy.runtime:make_onnx_student_policy",
         "exported student on ONNX Runtime",

@@ -44,16 +44,18 @@ def shipped_demos(scenario: str) -> Path:
     return p
 
 
-def shipped_student(scenario: str, kind: str = "mdn") -> Path:
-    """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``."""
-    p = STUDENTS_DIR / f"{base_scenario(scenario)}-{kind}.safetensors"
+def shipped_student(scenario: str, kind: str = "mdn", general: bool = False) -> Path:
+    """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``;
+    ``general``: the one student for many worlds (``general-KIND``), whatever the scenario."""
+    stem = f"general-{kind}" if general else f"{base_scenario(scenario)}-{kind}"
+    p = STUDENTS_DIR / f"{stem}.safetensors"
     if not p.is_file():
         names = sorted(q.stem for q in STUDENTS_DIR.glob("*.safetensors"))
         raise DataError(
             expect(
                 "shipped student",
                 f"one of {names}",
-                f"{scenario}-{kind}",
+                stem,
                 "train one with `pioneer distill` and pass checkpoint=PATH, or give the variant"
                 " a built-in 'base'",
             )

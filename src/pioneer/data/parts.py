@@ -24,7 +24,7 @@ def teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
 def student(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
     if not kwargs.get("checkpoint"):
-        shipped_student(scenario, str(kwargs.get("kind", "mdn")))
+        shipped_student(scenario, str(kwargs.get("kind", "mdn")), bool(kwargs.get("general")))
 
 
 def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:

@@ -73,11 +73,13 @@ def make_student_policy(
     name: str | None = None,
     action_mode: str | None = None,
     torch_threads: Annotated[int, Ge(1)] | None = 1,
+    general: bool = False,
 ) -> StudentPolicy:
     """Policy factory: load ``checkpoint`` (``{scenario}`` filled in) as a :class:`StudentPolicy`.
 
     Without ``checkpoint``: the shipped DAgger student of ``scenario`` and ``kind`` (default
-    "mdn"; :func:`pioneer.data.shipped_student`). ``kind`` ("mdn" | "mlp"), when given, must
+    "mdn"; :func:`pioneer.data.shipped_student`), or with ``general`` the one student for many
+    worlds. ``kind`` ("mdn" | "mlp"), when given, must
     match the checkpoint. ``torch_threads`` sets torch's intra-op threads for this process
     (1 by default: a batch-1 forward pass gains nothing from threads, and evaluation runs one
     worker per core); ``None`` leaves it.
@@ -85,11 +87,11 @@ def make_student_policy(
     if checkpoint is None:
         from pioneer.data import shipped_student
 
-        if scenario is None:
+        if scenario is None and not general:
             raise ConfigError(
                 expect("student policy", "checkpoint=PATH or a scenario", None, "pass one")
             )
-        checkpoint = shipped_student(scenario, kind or "mdn")
+        checkpoint = shipped_student(scenario or "", kind or "mdn", general=general)
     path = str(checkpoint).format(scenario=scenario) if scenario is not None else str(checkpoint)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
