@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS as PPO_CURVE_COLUMNS
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path, output_dir, to_json
 from pioneer.registration import ENV_IDS, register_envs
@@ -42,16 +43,8 @@ __all__ = [
 ]
 
 SB3_FORMAT = "pioneer.sb3-ppo/1"
-CURVE_COLUMNS = (
-    "rollout",
-    "env_steps",
-    "episodes",
-    "mean_return",
-    "success_rate",
-    "collision_rate",
-    "timeout_rate",
-    "wall_time_s",
-)
+# the CrowdNav++ trainer's learning-curve columns, counted in SB3 rollouts instead of updates
+CURVE_COLUMNS = ("rollout", *PPO_CURVE_COLUMNS[1:])
 WINDOW = 100  # finished episodes in the curve's running statistics
 _FALLBACK_ID = "pioneer/ElevatorHRRL-v0"  # any registered id; ``scenario=`` picks the world
 
