@@ -23,6 +23,7 @@ per step (Δθ = ω Δt); an earlier copy in the environment charged ω² Δt (d
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -82,10 +83,23 @@ def _norm2(d: F64) -> F64:
     return out
 
 
+@functools.lru_cache(maxsize=16)
+def _constants(rc: CrowdNavRewardConfig, dt: float) -> tuple[float, F64, F64]:
+    """Per config and Δt: the per-step factor Δt/T, the prediction times k·Δt_pred ``(K,)`` and
+    the intrusion penalties −20/2^(k+1) · Δt/T ``(K,)`` (computed once, not every step)."""
+    per_step = dt / rc.reference_dt if rc.reference_dt else 1.0  # T → Δt for per-step terms
+    k = np.arange(1, rc.n_pred + 1)
+    ks: F64 = (k * rc.pred_dt).astype(np.float64)
+    pen: F64 = (rc.intrusion / 2.0 ** (k + 1) * per_step).astype(np.float64)
+    ks.setflags(write=False)
+    pen.setflags(write=False)
+    return per_step, ks, pen
+
+
 def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _Parts:
     sim = world.sim
     dt = sim.dt
-    per_step = dt / rc.reference_dt if rc.reference_dt else 1.0  # T → Δt for per-step terms
+    per_step, ks, pen = _constants(rc, dt)
     event = classify(prev, new, sim.time_limit)
     collided, reached = event == _COLLISION, event == _SUCCESS
     d0 = _norm2(prev.goal - prev.robot[:, :2])
@@ -99,11 +113,9 @@ def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _
     first = np.where(collided, rc.collision, np.where(reached, rc.success, base))
     intr = np.zeros(new.batch_size)
     if new.n_humans:
-        ks = np.arange(1, rc.n_pred + 1) * rc.pred_dt
         pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
         dist = _norm2(pred - new.robot[:, None, None, :2])  # (B, N, K)
         hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
-        pen = rc.intrusion / 2.0 ** (np.arange(1, rc.n_pred + 1) + 1) * per_step  # (K,)
         intr = np.where(ongoing, np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2)), 0.0)
     v, w = new.command[:, 0], new.command[:, 1]
     spin = rc.spin * (w * dt) ** 2 / per_step
