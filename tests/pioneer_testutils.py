@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 from pioneer.sim.humans import WALKING
 from pioneer.sim.world import SimConfig, State, World
@@ -340,3 +341,12 @@ def interrupted_line(stderr: str) -> str:
     assert others == [], stderr
     assert lines[-1].startswith("pioneer: interrupted ("), stderr
     return lines[-1]
+
+
+# The two ways a long command is stopped: Ctrl-C (SIGINT to the whole process group, as a
+# terminal sends it) and ``kill`` (SIGTERM to the command alone).
+STOP_SIGNALS = pytest.mark.parametrize(
+    ("signum", "group"),
+    [(signal.SIGINT, True), (signal.SIGTERM, False)],
+    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
+)

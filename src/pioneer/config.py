@@ -24,7 +24,7 @@ import math
 import types
 import typing
 import weakref
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from pathlib import Path
 from typing import Annotated, Any, Self
 
@@ -337,13 +337,28 @@ def _check_type(owner: str, name: str, hint: Any, value: Any) -> Any:
     return value
 
 
-def check_parameters(owner: str, fn: Callable[..., Any], kwargs: dict[str, Any]) -> dict[str, Any]:
+def check_parameters(
+    owner: str, fn: Callable[..., Any], kwargs: dict[str, Any], fixed: Collection[str] = ()
+) -> dict[str, Any]:
     """``kwargs`` checked against the parameters of ``fn`` (a function or a class): every key
     must be a parameter, every value of its annotated type and within its ``Annotated``
-    bounds. Returns the checked values (ints given for floats as floats). A function taking
-    ``**kwargs`` accepts any key (its config checks them)."""
+    bounds, and every parameter without a default given — by ``kwargs``, by the caller's
+    ``fixed`` names, or ``scenario`` (always passed by the caller). Returns the checked values
+    (ints given for floats as floats). A function taking ``**kwargs`` accepts any key (its
+    config checks them)."""
     target = fn.__init__ if isinstance(fn, type) else fn  # type: ignore[misc]
     params = inspect.signature(fn).parameters
+    given = {*kwargs, *fixed, "scenario"}
+    missing = [
+        p.name
+        for p in params.values()
+        if p.default is inspect.Parameter.empty
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in given
+    ]
+    if missing:
+        example = ",".join(f"{k}=…" for k in missing)
+        raise ConfigError(expect(owner, f"a value for {missing}", "none", f"give {example}"))
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
         return dict(kwargs)
     allowed = sorted(k for k in params if k != "scenario")

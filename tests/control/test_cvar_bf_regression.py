@@ -147,9 +147,8 @@ def reference() -> dict[str, np.ndarray]:
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_cvar_bf_decisions_match_reference(reference, name, seed):
-    ref = {key: reference[f"{name}/{seed}/{key}"] for key in ("command", "beta_index")}
-    ref["fast_path"] = reference[f"{name}/{seed}/fast_path"]
-    ref["fallback"] = reference[f"{name}/{seed}/fallback"]
+    keys = ("command", "beta_index", "fast_path", "fallback")
+    ref = {key: reference[f"{name}/{seed}/{key}"] for key in keys}
     now = decisions(name, seed, commands=ref["command"])
     assert now["command"].shape == ref["command"].shape, "the replayed episode ended early"
     changed = np.flatnonzero(now["beta_index"] != ref["beta_index"])

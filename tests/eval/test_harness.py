@@ -29,7 +29,13 @@ from pioneer.eval.harness import (
     read_records,
     run_task,
 )
-from pioneer_testutils import assert_house_message, interrupted_line, run_cli, stop_cli
+from pioneer_testutils import (
+    STOP_SIGNALS,
+    assert_house_message,
+    interrupted_line,
+    run_cli,
+    stop_cli,
+)
 
 TIMING = ("wall_time_s", "decision_ms")
 GOAL = PolicySpec.make("goal")  # in "static" it drives into the person: ~20 steps an episode
@@ -235,11 +241,7 @@ SLOW_DWA = "dwa:n_v=15,n_omega=41"
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("signum", "group"),
-    [(signal.SIGINT, True), (signal.SIGTERM, False)],
-    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
-)
+@STOP_SIGNALS
 def test_a_signal_stops_eval_at_once_and_the_rerun_completes_the_set(tmp_path, signum, group):
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or ``kill`` (SIGTERM
     to the command alone) with two workers busy: exit 128 + signal within 2 s, no process

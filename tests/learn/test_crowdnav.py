@@ -51,6 +51,7 @@ from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario, sample_state
 from pioneer.sim.world import step
 from pioneer_testutils import (
+    STOP_SIGNALS,
     assert_house_message,
     interrupted_line,
     make_state,
@@ -364,11 +365,7 @@ def test_train_cli_end_to_end_and_resume(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("signum", "group"),
-    [(signal.SIGINT, True), (signal.SIGTERM, False)],
-    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
-)
+@STOP_SIGNALS
 def test_a_signal_stops_training_between_updates_and_the_rerun_matches(
     tmp_path, capsys, signum, group
 ):

@@ -37,7 +37,13 @@ from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
 from pioneer.sim.scenarios import ScenarioConfig, StaticStudyLayout, static_study_scenario
 from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.world import SimConfig
-from pioneer_testutils import assert_house_message, interrupted_line, run_cli, stop_cli
+from pioneer_testutils import (
+    STOP_SIGNALS,
+    assert_house_message,
+    interrupted_line,
+    run_cli,
+    stop_cli,
+)
 
 torch.set_num_threads(1)
 
@@ -455,11 +461,7 @@ def static_run(tmp_path_factory: pytest.TempPathFactory, reward_file: Path) -> P
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("signum", "group"),
-    [(signal.SIGINT, True), (signal.SIGTERM, False)],
-    ids=["SIGINT-to-the-group", "SIGTERM-to-the-command"],
-)
+@STOP_SIGNALS
 def test_a_signal_stops_distill_at_once_and_the_rerun_ends_bit_for_bit(
     tmp_path, reward_file, static_run, signum, group
 ):

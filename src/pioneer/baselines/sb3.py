@@ -19,7 +19,6 @@ scale used here takes minutes. Needs the ``sb3`` extra: ``pip install pioneer-na
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -30,7 +29,7 @@ from numpy.typing import NDArray
 
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS as PPO_CURVE_COLUMNS
 from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import atomic_path, output_dir, to_json
+from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.registration import ENV_IDS, register_envs
 
 __all__ = [
@@ -200,8 +199,7 @@ def train_sb3_ppo(
         out / "curve.png",
         title=f"Stable-Baselines3 PPO · {scenario}",
     )
-    with atomic_path(out / "train.json") as tmp:
-        tmp.write_text(to_json(summary, indent=2) + "\n", encoding="utf-8")
+    write_text_atomic(out / "train.json", to_json(summary, indent=2) + "\n")
     return summary
 
 
@@ -210,18 +208,15 @@ def _box(space: Any) -> dict[str, list[float]]:
 
 
 def _save_policy(policy: Any, path: Path, info: Mapping[str, Any]) -> None:
-    from safetensors.torch import save
+    from pioneer.nn.checkpoint import write_checkpoint
 
-    tensors = {k: v.detach().cpu().contiguous() for k, v in policy.state_dict().items()}
     config = {
         "net_arch": policy.net_arch,
         "activation_fn": policy.activation_fn.__name__,
         "observation_space": _box(policy.observation_space),
         "action_space": _box(policy.action_space),
     }
-    meta = {"format": SB3_FORMAT, "config": json.dumps(config), "info": to_json(dict(info))}
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(save(tensors, metadata=meta))
+    write_checkpoint(policy, config, path, SB3_FORMAT, info)
 
 
 # ------------------------------------------------------------------------------ the policy
@@ -246,20 +241,15 @@ def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-
     ``pioneer train sb3-ppo``; ``{scenario}`` is filled in)."""
     import gymnasium as gym
     import torch
-    from safetensors import SafetensorError, safe_open
     from stable_baselines3.common.policies import ActorCriticPolicy
+
+    from pioneer.nn.checkpoint import load_checked, read_checkpoint
 
     p = Path(weights.format(scenario=scenario) if scenario else weights)
     fix = "train one with `pioneer train sb3-ppo --out DIR` and pass weights=DIR/policy.safetensors"
-    if not p.is_file():
-        raise DataError(expect("sb3-ppo weights", "an existing file", str(p), fix))
+    meta, arrays = read_checkpoint(p, SB3_FORMAT, "sb3-ppo weights", fix, fix, tensors=True)
+    cfg = meta["config"]
     try:
-        with safe_open(str(p), framework="pt") as fh:
-            raw = dict(fh.metadata() or {})
-            arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118
-        if raw.get("format") != SB3_FORMAT:
-            raise DataError(expect(f"{p}: format", SB3_FORMAT, raw.get("format"), fix))
-        cfg = json.loads(raw["config"])
         spaces = [
             gym.spaces.Box(
                 np.array(cfg[k]["low"], dtype=np.float32),
@@ -274,9 +264,9 @@ def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-
             net_arch=cfg["net_arch"],
             activation_fn=getattr(torch.nn, cfg["activation_fn"]),
         )
-        policy.load_state_dict(arrays, strict=True)
-    except (SafetensorError, OSError, ValueError, KeyError, TypeError, RuntimeError) as exc:
-        raise DataError(expect(f"sb3-ppo weights {p}", "a policy file", f"{exc}", fix)) from exc
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise DataError(expect(f"{p}: config", "an SB3 policy config", f"{exc}", fix)) from exc
+    load_checked(policy, arrays, p, f"SB3 MlpPolicy {cfg['net_arch']}", fix)
     policy.set_training_mode(False)
     torch.set_num_threads(1)
     return Sb3Policy(policy, name=name)

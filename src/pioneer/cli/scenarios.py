@@ -120,7 +120,7 @@ class SampleLayouts:
 
     def run(self) -> int:
         """Draw, write the file, print a summary line."""
-        from pioneer.io import atomic_path, to_json
+        from pioneer.io import to_json, write_text_atomic
         from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
         from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
 
@@ -131,8 +131,7 @@ class SampleLayouts:
             "distribution": {**dist.to_dict(), "seed": self.seed, "rejected_draws": rejected},
             "scenarios": variants,
         }
-        with atomic_path(self.out) as tmp:
-            tmp.write_text(to_json(doc, indent=1) + "\n", encoding="utf-8")
+        write_text_atomic(self.out, to_json(doc, indent=1) + "\n")
         print(f"{len(variants)} layouts ({rejected} draws could not place their bodies): ", end="")
         print(self.out)
         return 0

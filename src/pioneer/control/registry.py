@@ -269,21 +269,7 @@ def check_policy_kwargs(name: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
     naming the parameter, what it takes and the fix; so does a required parameter (one without
     a default) that neither ``kwargs`` nor the entry gives."""
     entry = policy_entry(name)
-    factory = entry.target()
-    given = {*kwargs, *dict(entry.kwargs), "scenario"}
-    missing = [
-        p.name
-        for p in inspect.signature(factory).parameters.values()
-        if p.default is inspect.Parameter.empty
-        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-        and p.name not in given
-    ]
-    if missing:
-        example = ",".join(f"{k}=…" for k in missing)
-        raise ConfigError(
-            expect(f"policy {name}", f"a value for {missing}", "none", f"use {name}:{example}")
-        )
-    return check_parameters(f"policy {name}", factory, dict(kwargs))
+    return check_parameters(f"policy {name}", entry.target(), dict(kwargs), dict(entry.kwargs))
 
 
 def check_parts(name: str, scenario: str, kwargs: Mapping[str, Any]) -> None:
