@@ -128,7 +128,7 @@ def _rerun_with_fresh_numba_cache(argv: list[str]) -> int:
     """Run this script again with ``NUMBA_CACHE_DIR`` pointing at an empty temp directory.
 
     numba's on-disk cache is keyed on the source file of the jitted function only: after an
-    edit to ``humans.py`` or ``geometry.py`` the cached ``world._step_kernel`` (which inlines
+    edit to ``humans.py`` or ``geometry.py`` the cached ``kernel.step_kernel`` (which inlines
     them) is still loaded, so a benchmark would silently time the old code. Compiling afresh
     costs a few seconds (excluded from every timing by the warm-up runs).
     """

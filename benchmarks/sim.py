@@ -46,7 +46,8 @@ def step_kernel_case(
 ) -> Case | None:
     """``n`` chained in-place calls of the bare step kernel (None if its signature changed)."""
     try:
-        from pioneer.sim.world import _step_kernel, _step_kernel_args
+        from pioneer.sim.kernel import step_kernel
+        from pioneer.sim.world import step_kernel_args
     except ImportError:
         return None
     h_dt = world.sim.dt if dt is None else dt
@@ -54,11 +55,11 @@ def step_kernel_case(
     uc = np.ascontiguousarray(u, dtype=np.float64)
 
     def setup() -> tuple[Any, ...]:
-        return _step_kernel_args(world, s0.copy(), uc, h_dt, n_sub)
+        return step_kernel_args(world, s0.copy(), uc, h_dt, n_sub)
 
     def run(args: tuple[Any, ...]) -> None:
         for _ in range(n):
-            _step_kernel(*args)
+            step_kernel(*args)
 
     try:
         run(setup())

@@ -25,7 +25,7 @@ from pioneer.sim import (
     step,
 )
 from pioneer.sim.robot import integrate_unicycle
-from pioneer.sim.world import observe_states
+from pioneer.sim.world import advance, observe_states
 from pioneer_testutils import (
     assert_house_message,
     make_state,
@@ -391,3 +391,40 @@ def test_observe_states_equals_observing_each_state():
         np.testing.assert_array_equal(stacked[k], observe(world, state))
     with pytest.raises(ConfigError, match="equal B and N"):
         observe_states(world, [states[0], states[1].take(0)])
+
+
+@pytest.mark.parametrize("name", ["hr-rl", "hl-rr", "hr-rl-compact"])
+def test_advance_equals_repeated_steps_bit_for_bit(name):
+    """``advance`` (one kernel call for L steps, recording each) gives exactly the states,
+    poses, humans, clearances and observations of L calls of ``step``."""
+    scenario = get_scenario(name)
+    world = scenario.world()
+    rng = np.random.default_rng(11)
+    s0 = sample_state(scenario, rng).repeat(9)
+    u = rng.uniform(-1.0, 1.0, (9, 2))
+    tr = advance(world, s0, u, dt=0.3, n_steps=6)
+    s, states = s0, []
+    for _ in range(6):
+        s = step(world, s, u, dt=0.3)
+        states.append(s)
+    assert states_equal(tr.final, s)
+    assert states_equal(s0, sample_state(scenario, np.random.default_rng(11)).repeat(9))
+    np.testing.assert_array_equal(tr.poses, np.stack([x.robot for x in states], axis=1))
+    np.testing.assert_array_equal(tr.circles[..., :2], np.stack([x.h_pos for x in states], 1))
+    gone = np.stack([x.h_status == GONE for x in states], axis=1)
+    np.testing.assert_array_equal(tr.circles[..., 2] == 0.0, gone)
+    np.testing.assert_array_equal(tr.clearance, np.min([x.clearance for x in states], axis=0))
+    np.testing.assert_array_equal(
+        tr.wall_clearance, np.min([x.wall_clearance for x in states], axis=0)
+    )
+    np.testing.assert_array_equal(
+        tr.observations(world), observe_states(world, states).transpose(1, 0, 2)
+    )
+
+
+def test_advance_refuses_bad_arguments():
+    world, state = _hr_rl_state()
+    with pytest.raises(ConfigError, match="n_steps"):
+        advance(world, state, [0.3, 0.0], dt=0.3, n_steps=0)
+    with pytest.raises(ConfigError, match="dt"):
+        advance(world, state, [0.3, 0.0], dt=0.0, n_steps=3)

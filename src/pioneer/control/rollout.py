@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
-from pioneer.sim.world import State, World, observe_states, step
+from pioneer.sim.world import State, World, advance, observe_states, step
 
 __all__ = ["Rollout", "candidate_commands", "rollout"]
 
@@ -70,23 +70,32 @@ def rollout(
             expect("human_model", "'privileged' or 'constant_velocity'", human_model, "pick one")
         )
     n_steps = math.floor(horizon / dt + 1e-9)
+    if n_steps < 1:
+        raise ConfigError(
+            expect("rollout horizon", f">= the rollout step dt = {dt} s", horizon, "lengthen it")
+        )
     c = commands.shape[0]
     s = state.repeat(c)
-    cv = human_model == "constant_velocity"
-    if cv:
-        # Freeze the social-force model; humans are moved along their current velocity instead.
-        moving = s.h_status != GONE
-        s.h_status[moving] = ARRIVED
-        v0 = state.h_vel.copy()
+    if human_model == "privileged":
+        tr = advance(world, s, commands, dt, n_steps)
+        obs = tr.observations(world)
+        return Rollout(
+            commands, tr.poses, obs, tr.final.collided.copy(), tr.clearance,
+            tr.wall_clearance, tr.final,
+        )  # fmt: skip
+    # Constant velocity: freeze the social-force model and move the humans along their current
+    # velocity after each step, then check the robot against the moved humans too.
+    moving = s.h_status != GONE
+    s.h_status[moving] = ARRIVED
+    v0 = state.h_vel.copy()
     robot = np.empty((c, n_steps, 3))
     states = []
     clear = np.full(c, np.inf)
     wclear = np.full(c, np.inf)
     for k in range(n_steps):
         s = step(world, s, commands, dt=dt)
-        if cv and state.n_humans:
+        if state.n_humans:
             s.h_pos[moving] = (state.h_pos + v0 * (dt * (k + 1))).repeat(c, axis=0)[moving]
-            # The step checked collisions against frozen humans; check the moved ones too.
             gap = np.linalg.norm(s.h_pos - s.robot[:, None, :2], axis=2) - s.h_radius
             gap = np.where(moving, gap - world.sim.robot.radius, np.inf).min(axis=1)
             np.minimum(s.clearance, gap, out=s.clearance)
@@ -95,7 +104,5 @@ def rollout(
         states.append(s)
         np.minimum(clear, s.clearance, out=clear)
         np.minimum(wclear, s.wall_clearance, out=wclear)
-    obs = np.empty((c, n_steps, world.sim.lidar.obs_dim), dtype=np.float32)  # (C, L, 29)
-    if states:
-        obs[:] = observe_states(world, states).transpose(1, 0, 2)
+    obs = np.ascontiguousarray(observe_states(world, states).transpose(1, 0, 2))  # (C, L, 29)
     return Rollout(commands, robot, obs, s.collided.copy(), clear, wclear, s)

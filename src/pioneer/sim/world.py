@@ -20,27 +20,24 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
-from pioneer.sim.geometry import (
-    norm2d,
-    segment_segment_distance,
-    swept_point_distance,
-    wall_offsets,
-)
-from pioneer.sim.humans import GONE, SocialForceConfig, sfm_substep
+from pioneer.sim.humans import GONE, SocialForceConfig
+from pioneer.sim.kernel import step_kernel, trajectory_kernel
 from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
-from pioneer.sim.robot import RobotConfig, integrate_unicycle, validate_command
+from pioneer.sim.robot import RobotConfig, validate_command
 
 __all__ = [
     "SimConfig",
     "State",
+    "Trajectory",
     "World",
+    "advance",
     "goal_bearing",
     "observe",
+    "observe_arrays",
     "observe_states",
     "scan",
     "step",
@@ -239,12 +236,53 @@ def step(world: World, state: State, command: F64 | list[float], dt: float | Non
     u = validate_command(command, state.batch_size)
     new = state.copy()
     n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
-    _step_kernel(*_step_kernel_args(world, new, u, h_dt, n_sub))  # clips u into new.command
+    step_kernel(*step_kernel_args(world, new, u, h_dt, n_sub))  # clips u into new.command
     return new
 
 
-def _step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> tuple[Any, ...]:
-    """The arguments of ``_step_kernel`` advancing ``s`` in place (also used by benchmarks)."""
+@dataclasses.dataclass(frozen=True, eq=False)
+class Trajectory:
+    """L steps of B copies under constant commands (:func:`advance`), every step recorded."""
+
+    final: State  # the copies after the L-th step
+    poses: F64  # (B, L, 3) robot pose after each step
+    circles: F64  # (B, L, N, 3) the humans after each step as LiDAR circles x, y, r (0: gone)
+    clearance: F64  # (B,) minimum swept human clearance over the L steps [m]
+    wall_clearance: F64  # (B,) minimum swept wall clearance over the L steps [m]
+
+    def observations(self, world: World) -> NDArray[np.float32]:
+        """The noise-free observation after every step, ``(B, L, 29)`` float32: the values of
+        :func:`observe_states` of the L recorded states (the teacher plans on noise-free rays,
+        see there)."""
+        n_b, n_l = self.poses.shape[:2]
+        poses = self.poses.reshape(n_b * n_l, 3)
+        goal = np.repeat(self.final.goal, n_l, axis=0)
+        circles = self.circles.reshape(n_b * n_l, self.circles.shape[2], 3)
+        return observe_arrays(world, poses, circles, goal).reshape(n_b, n_l, -1)
+
+
+def advance(world: World, state: State, command: F64, dt: float, n_steps: int) -> Trajectory:
+    """``n_steps`` calls of :func:`step` with the commands ``(B, 2)`` held, in one kernel call,
+    recording every step (bit for bit the values of the repeated ``step``; tested)."""
+    h_dt = float(dt)
+    check_positive("advance", "dt", h_dt)
+    if n_steps < 1:
+        raise ConfigError(expect("advance n_steps", ">= 1", n_steps, "pass at least 1"))
+    u = validate_command(command, state.batch_size)
+    new = state.copy()
+    n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
+    n_b, n_h = state.batch_size, state.n_humans
+    poses = np.empty((n_b, n_steps, 3))
+    circles = np.empty((n_b, n_steps, n_h, 3))
+    clear = np.empty(n_b)
+    wclear = np.empty(n_b)
+    args = (*step_kernel_args(world, new, u, h_dt, n_sub), poses, circles, clear, wclear)
+    trajectory_kernel(*args)
+    return Trajectory(new, poses, circles, clear, wclear)
+
+
+def step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> tuple[Any, ...]:
+    """The arguments of ``kernel.step_kernel`` advancing ``s`` in place (also for benchmarks)."""
     robot = world.sim.robot
     return (
         s.robot,
@@ -282,143 +320,6 @@ def _step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> 
         dt,
         n_sub,
     )
-
-
-@njit(cache=True, error_model="numpy")
-def _step_kernel(
-    robot: F64,
-    cmd: F64,
-    cmd_out: F64,
-    v_min: float,
-    v_max: float,
-    omega_max: float,
-    goal: F64,
-    t: F64,
-    path: F64,
-    collided: NDArray[np.bool_],
-    reached: NDArray[np.bool_],
-    clear_out: F64,
-    wclear_out: F64,
-    hpos: F64,
-    hvel: F64,
-    hrad: F64,
-    hvpref: F64,
-    hwp: F64,
-    hnwp: NDArray[np.int64],
-    hwpi: NDArray[np.int64],
-    hstatus: NDArray[np.int8],
-    hdelay: F64,
-    hwait: NDArray[np.int64],
-    hrelease: NDArray[np.int64],
-    hreacts: NDArray[np.bool_],
-    hhome: F64,
-    walls: F64,
-    wall_tab: F64,
-    bounds: F64,
-    params: F64,
-    r_robot: float,
-    goal_tol: float,
-    dt: float,
-    n_sub: int,
-) -> None:
-    n_b = robot.shape[0]
-    n_h = hpos.shape[1]
-    m = walls.shape[0]
-    h = dt / n_sub
-    old = np.empty((n_h, 2))
-    fx = np.empty(n_h)
-    fy = np.empty(n_h)
-    ready = np.empty(n_h)
-    wall_d = np.empty(n_h)
-    wall_scr = np.empty((3, wall_tab.shape[1]))
-    was_present = np.empty(n_h, dtype=np.bool_)
-    for b in range(n_b):
-        x = robot[b, 0]
-        y = robot[b, 1]
-        th = robot[b, 2]
-        # clip_command's np.clip, element by element (the same values)
-        v = min(max(cmd[b, 0], v_min), v_max)
-        w = min(max(cmd[b, 1], -omega_max), omega_max)
-        cmd_out[b, 0] = v
-        cmd_out[b, 1] = w
-        sag = v * h * abs(w * h) / 8.0
-        cmin = np.inf
-        wmin = np.inf
-        for s in range(n_sub):
-            for i in range(n_h):
-                old[i, 0] = hpos[b, i, 0]
-                old[i, 1] = hpos[b, i, 1]
-                was_present[i] = hstatus[b, i] != GONE
-            sfm_substep(
-                b,
-                hpos,
-                hvel,
-                hrad,
-                hvpref,
-                hwp,
-                hnwp,
-                hwpi,
-                hstatus,
-                hdelay,
-                hwait,
-                hrelease,
-                hreacts,
-                hhome,
-                fx,
-                fy,
-                ready,
-                wall_d,
-                wall_scr,
-                t[b] + s * h,
-                x,
-                y,
-                r_robot,
-                walls,
-                wall_tab,
-                bounds,
-                params,
-                h,
-            )
-            x1, y1, th1 = integrate_unicycle(x, y, th, v, w, h)
-            for i in range(n_h):
-                if not was_present[i]:
-                    continue
-                d = swept_point_distance(
-                    old[i, 0] - x, old[i, 1] - y, hpos[b, i, 0] - x1, hpos[b, i, 1] - y1
-                )
-                cmin = min(cmin, d - r_robot - hrad[b, i] - sag)
-            half = 0.5 * norm2d(x1 - x, y1 - y)
-            mx = 0.5 * (x + x1)
-            my = 0.5 * (y + y1)
-            wall_offsets(mx, my, wall_tab, wall_scr)
-            # The wall nearest the chord's midpoint first: its distance makes the cheap bound
-            # below skip most of the others (a minimum does not depend on the order).
-            near = 0
-            for k in range(1, m):
-                near = k if wall_scr[2, k] < wall_scr[2, near] else near
-            for j in range(m):
-                k = near if j == 0 else (j - 1 if j <= near else j)
-                # Cheap bound first: the chord lies within `half` of its midpoint.
-                if wall_scr[2, k] - half - r_robot - sag >= wmin:
-                    continue
-                d = segment_segment_distance(
-                    x, y, x1, y1, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
-                )
-                wmin = min(wmin, d - r_robot - sag)
-            x = x1
-            y = y1
-            th = th1
-        robot[b, 0] = x
-        robot[b, 1] = y
-        robot[b, 2] = th
-        t[b] += dt
-        path[b] += v * dt
-        clear_out[b] = cmin
-        wclear_out[b] = wmin
-        if cmin < 0.0 or wmin < 0.0:
-            collided[b] = True
-        if not collided[b] and math.hypot(goal[b, 0] - x, goal[b, 1] - y) < goal_tol:
-            reached[b] = True
 
 
 def _circles(state: State) -> F64:
@@ -459,10 +360,10 @@ def observe_states(world: World, states: Sequence[State]) -> NDArray[np.float32]
     ``(len(states), B, 29)``.
 
     The same values as observing each state alone with a noise-free LiDAR, with one
-    ray-casting call for all of them (the teacher observes its 10 rollout states of 120 copies
-    this way). The world's ``lidar.noise_std`` is not applied: a planner predicts the expected
-    scan of a future state, so the teacher plans on noise-free rays even in a world whose
-    LiDAR is noisy (the noise reaches the policies that act on the observation).
+    ray-casting call for all of them. The world's ``lidar.noise_std`` is not applied: a planner
+    predicts the expected scan of a future state, so the teacher plans on noise-free rays even
+    in a world whose LiDAR is noisy (the noise reaches the policies that act on the
+    observation).
     """
     lid = world.sim.lidar
     if not states:
@@ -474,6 +375,15 @@ def observe_states(world: World, states: Sequence[State]) -> NDArray[np.float32]
         )
     robot = np.concatenate([s.robot for s in states])
     circles = np.concatenate([_circles(s) for s in states])
-    ranges = cast_rays(robot, circles, world.walls, lid.n_beams, lid.max_range)
-    bearing = np.concatenate([goal_bearing(s) for s in states])
-    return observation_from_ranges(ranges, bearing, lid).reshape(len(states), n_b, -1)
+    goal = np.concatenate([s.goal for s in states])
+    return observe_arrays(world, robot, circles, goal).reshape(len(states), n_b, -1)
+
+
+def observe_arrays(world: World, poses: F64, circles: F64, goal: F64) -> NDArray[np.float32]:
+    """The noise-free observation of robots at ``poses (P, 3)`` among ``circles (P, N, 3)``
+    (x, y, r; r = 0 for a removed human) heading for ``goal (P, 2)``, shape ``(P, 29)``."""
+    lid = world.sim.lidar
+    ranges = cast_rays(poses, circles, world.walls, lid.n_beams, lid.max_range)
+    d = goal - poses[:, :2]
+    bearing = np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2]
+    return observation_from_ranges(ranges, bearing, lid)
