@@ -58,14 +58,35 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
 
 
 def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys):
-    from pioneer.experiments.reproduce import PROFILES, _announce, expected_seconds
+    from pioneer.experiments.reproduce import EPISODE_S, PROFILES, _announce, expected_seconds
 
     rows = ["teacher", "goal"]
-    # 1,000 episodes a row on 2 workers: (1.37 + 0.009) s × 1,000 / 2
-    assert expected_seconds(rows, 1000, 2) == pytest.approx(689.5)
-    assert expected_seconds(rows, 1000, 1) == pytest.approx(2 * 689.5)
+    per_episode = EPISODE_S["teacher"] + EPISODE_S["goal"]
+    assert expected_seconds(rows, 1000, 2) == pytest.approx(per_episode * 500)
+    assert expected_seconds(rows, 1000, 1) == pytest.approx(per_episode * 1000)
     assert expected_seconds(["unknown"], 10, 1) == pytest.approx(1.0)
     _announce("paper", PROFILES["paper"], rows, tmp_path, workers=2)
     line = capsys.readouterr().err.strip()
     assert line.startswith("pioneer reproduce --profile paper: 2,000 episodes (0 done)")
-    assert "expected ≈ 11 min with 2 worker(s)" in line  # 689.5 s
+    paper, extra = EPISODE_S["teacher"] * 500 / 60, EPISODE_S["goal"] * 500 / 60
+    assert (
+        f"expected ≈ {paper + extra:.0f} min (the paper's rows {paper:.0f}, the extra rows "
+        f"{extra:.0f}) with 2 worker(s)"
+    ) in line
+
+
+def test_the_report_says_where_the_time_went(smoke: Path) -> None:
+    """Per row: episodes and summed run time; the paper's rows apart from the extra ones."""
+    from pioneer.experiments.reproduce import PAPER_ROWS, row_times
+
+    recs = read_records(smoke / "eval" / "episodes.jsonl")
+    index = (smoke / "index.md").read_text()
+    section = index[index.index("## Where the time went") :]
+    times = row_times(recs)
+    assert set(times) == {r["policy"] for r in recs}
+    for row, (n, sec) in times.items():
+        part = "paper" if row in PAPER_ROWS else "extra"
+        assert f"| {row} | {part} | {n} | {sec / 60:.1f} |" in section
+    paper = sum(sec for row, (_, sec) in times.items() if row in PAPER_ROWS)
+    assert f"The paper's rows (Tables I–IV) ran {paper / 60:.1f} CPU-min" in section
+    assert set(PAPER_ROWS) == {*TEACHERS, *BASELINES, *STUDENTS}

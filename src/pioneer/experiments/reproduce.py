@@ -27,7 +27,15 @@ from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
 from pioneer.io import output_dir, to_json, write_text_atomic
 
-__all__ = ["EPISODE_S", "PROFILES", "Profile", "expected_seconds", "reproduce"]
+__all__ = [
+    "EPISODE_S",
+    "PAPER_ROWS",
+    "PROFILES",
+    "Profile",
+    "expected_seconds",
+    "reproduce",
+    "row_times",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +57,7 @@ STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
+PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 
 # Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
 # VM in the paper profile of 2026-11-24 (mean of HR-RL and HL-RR; docs/performance.md). Only
@@ -76,6 +85,39 @@ def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -
     ``workers`` cores like the reference VM's (:data:`EPISODE_S`)."""
     cpu = sum(EPISODE_S.get(row, 0.1) for row in rows) * episodes_per_row
     return cpu / max(workers, 1)
+
+
+def row_times(records: Sequence[dict[str, Any]]) -> dict[str, tuple[int, float]]:
+    """Episodes and summed episode run time [s] of every policy row, in first-seen order."""
+    out: dict[str, tuple[int, float]] = {}
+    for r in records:
+        n, sec = out.get(r["policy"], (0, 0.0))
+        out[r["policy"]] = (n + 1, sec + float(r.get("wall_time_s", 0.0)))
+    return out
+
+
+def _time_table(records: Sequence[dict[str, Any]], workers: int) -> str:
+    """Markdown: where the episodes' time went, the paper's rows apart from the extra ones."""
+    times = row_times(records)
+    lines = [
+        "## Where the time went",
+        "",
+        "| row | part | episodes | run time [CPU-min] | per episode [s] |",
+        "|---|---|---|---|---|",
+    ]
+    total = {"paper": 0.0, "extra": 0.0}
+    for row, (n, sec) in times.items():
+        part = "paper" if row in PAPER_ROWS else "extra"
+        total[part] += sec
+        lines.append(f"| {row} | {part} | {n} | {sec / 60:.1f} | {sec / max(n, 1):.3f} |")
+    lines += [
+        "",
+        f"The paper's rows (Tables I–IV) ran {total['paper'] / 60:.1f} CPU-min, the extra rows "
+        f"{total['extra'] / 60:.1f} CPU-min: ≈ {total['paper'] / 60 / workers:.1f} and "
+        f"{total['extra'] / 60 / workers:.1f} min of wall time on {workers} worker(s).",
+        "",
+    ]
+    return "\n".join(lines)
 
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
@@ -141,6 +183,7 @@ def reproduce(
         ],
     )
     md += _table_iv(out, records)
+    md += _time_table(records, _workers(workers))
     figures = _figures(out, reward_tpl)
     elapsed = time.perf_counter() - t0
     episode_s = sum(float(r.get("wall_time_s", 0.0)) for r in records)
@@ -164,23 +207,31 @@ def _announce(
     profile: str, prof: Profile, rows: Sequence[str], out: Path, workers: int | None
 ) -> None:
     """One line before the work: how many episodes, how many are done, the expected time."""
-    import os
     import sys
 
     from pioneer.eval.harness import EPISODES_FILE, read_records
 
-    n_workers = workers or os.cpu_count() or 1
+    n_workers = _workers(workers)
     per_row = len(SCENARIOS) * prof.seeds * prof.trials
     done = len(read_records(out / "eval" / EPISODES_FILE))
     total = per_row * len(rows)
-    left = expected_seconds(rows, per_row, n_workers) * (1.0 - done / total)
+    left = 1.0 - done / total
+    paper = expected_seconds([r for r in rows if r in PAPER_ROWS], per_row, n_workers) * left
+    extra = expected_seconds([r for r in rows if r not in PAPER_ROWS], per_row, n_workers) * left
     print(
         f"pioneer reproduce --profile {profile}: {total:,} episodes ({done:,} done), expected "
-        f"≈ {left / 60:.0f} min with {n_workers} worker(s) on a machine like the reference "
-        "2-core VM (docs/performance.md)",
+        f"≈ {(paper + extra) / 60:.0f} min (the paper's rows {paper / 60:.0f}, the extra rows "
+        f"{extra / 60:.0f}) with {n_workers} worker(s) on a machine like the reference 2-core "
+        "VM (docs/performance.md)",
         file=sys.stderr,
         flush=True,
     )
+
+
+def _workers(workers: int | None) -> int:
+    import os
+
+    return workers or os.cpu_count() or 1
 
 
 def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
