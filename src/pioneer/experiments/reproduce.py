@@ -60,23 +60,23 @@ CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Tabl
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 
 # Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
-# VM in the paper profile of 2026-11-24 (mean of HR-RL and HL-RR; docs/performance.md). Only
-# for the expected time that `reproduce` reports before it starts; a policy not listed counts
-# 0.1 s.
+# VM in the paper profile of 2026-11-24, session 13 (mean over HR-RL and HL-RR; the report's
+# "Where the time went", docs/performance.md). Only for the expected time that `reproduce`
+# reports before it starts; a policy not listed counts 0.1 s.
 EPISODE_S = {
-    "teacher": 1.37,
-    "teacher-no-density": 0.85,
-    "teacher-no-goal": 1.65,
-    "teacher-no-obstacle": 1.29,
-    "cvar-bf": 1.12,
-    "crowdnav++": 0.06,
-    "crowdnav++-il": 0.06,
-    "dwa": 0.07,
-    "sfm": 0.014,
-    "goal": 0.009,
-    "student-mdn": 0.03,
-    "student-mlp": 0.024,
-    "student-shield": 0.046,
+    "teacher": 0.979,
+    "teacher-no-density": 0.678,
+    "teacher-no-goal": 1.341,
+    "teacher-no-obstacle": 0.986,
+    "cvar-bf": 0.359,
+    "crowdnav++": 0.034,
+    "crowdnav++-il": 0.034,  # the same network as crowdnav++ (not in the profile)
+    "dwa": 0.073,
+    "sfm": 0.016,
+    "goal": 0.011,
+    "student-mdn": 0.072,
+    "student-mlp": 0.056,
+    "student-shield": 0.109,
 }
 
 
