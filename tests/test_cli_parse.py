@@ -128,6 +128,12 @@ def test_reward_fit_defaults_are_the_density_config():
         (["demos", "show"], ["FILE", "required"]),
         (["demos", "show", "a.npz", "b.npz"], ["'b.npz'"]),
         (["run", "--lidar=yes"], ["'yes'"]),
+        # argparse would keep the last of a repeated option silently (hl-rr alone here)
+        (
+            ["eval", "--out", "x", "--scenario", "hr-rl", "--scenario", "hl-rr"],
+            ["--scenario given more than once", "write --scenario A B"],
+        ),
+        (["run", "--seed", "1", "--seed=2"], ["--seed given more than once"]),
     ],
 )
 def test_a_bad_command_line_is_one_line_and_exit_2(argv, needles, capsys, tmp_path):

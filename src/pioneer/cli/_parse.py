@@ -54,6 +54,18 @@ def parse(
 ) -> T:
     """``tyro.cli(cls)`` over ``args``; ``--help`` prints and exits 0, a bad command line exits 2
     with one line on stderr (see the module docstring) that names ``label`` (default: prog)."""
+    repeated = _repeated_option(args)
+    if repeated is not None:
+        # argparse (under tyro) keeps the last of a repeated option and drops the others
+        # silently: `--scenario hr-rl --scenario hl-rr` would evaluate hl-rr alone.
+        refuse(
+            expect(
+                f"{label or prog} {repeated}",
+                "each option once (several values follow one flag)",
+                f"{repeated} given more than once",
+                f"write {repeated} A B",
+            )
+        )
     box = io.StringIO()
     try:
         with _hook(cls, args, label or prog), contextlib.redirect_stderr(box):
@@ -64,6 +76,20 @@ def parse(
         if exc.code in (0, None):
             raise
         refuse(_flatten(box.getvalue()) or f"{prog}: the command line was refused; fix: see --help")
+
+
+def _repeated_option(args: Sequence[str]) -> str | None:
+    """The first long option given twice in ``args`` (before a ``--``), or None."""
+    seen: set[str] = set()
+    for arg in args:
+        if arg == "--":
+            break
+        if arg.startswith("--"):
+            name = arg.split("=", 1)[0]
+            if name in seen:
+                return name
+            seen.add(name)
+    return None
 
 
 @contextlib.contextmanager
