@@ -1,9 +1,10 @@
 """Batched lookahead rollouts through the pure world step (SPEC 4).
 
 Each candidate command is held for the horizon T; the world (robot and humans) is advanced
-by :func:`pioneer.sim.world.step` at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states, every candidate in
-one batched call. Humans follow the privileged simulator model (they react to the robot) or,
-as an option, a constant-velocity prediction.
+at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states by :func:`pioneer.sim.world.advance`: the L steps
+of every candidate in one kernel call, each step recorded, with the values of L calls of
+:func:`~pioneer.sim.world.step`. Humans follow the privileged simulator model (they react to
+the robot) or, as an option, a constant-velocity prediction.
 """
 
 from __future__ import annotations
