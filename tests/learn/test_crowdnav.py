@@ -414,7 +414,10 @@ def test_a_signal_stops_training_between_updates_and_the_rerun_matches(
     ],
 )
 def test_train_cli_bad_input(tmp_path, capsys, extra, needle):
-    argv = ["train", "crowdnav++", "--out", str(tmp_path / "x"), "--steps", "60", "--envs", "2"]
+    base = {"--steps": "60", "--envs": "2"}
+    base.pop(extra[0], None)  # the bad value replaces the default (an option may not repeat)
+    argv = ["train", "crowdnav++", "--out", str(tmp_path / "x")]
+    argv += [a for kv in base.items() for a in kv]
     assert main([*argv, *extra]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("pioneer: error:")
