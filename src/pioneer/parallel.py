@@ -27,7 +27,7 @@ from typing import Any, TypeVar
 
 from pioneer.interrupt import SIGNALS, deferred
 
-__all__ = ["bounded_map", "spawn_pool"]
+__all__ = ["bounded_map", "spawn_pool", "worker_count"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -139,3 +139,8 @@ def bounded_map(
             nxt = next(it, None)
             if nxt is not None:
                 pending.add(pool.submit(fn, nxt))
+
+
+def worker_count(workers: int | None) -> int:
+    """The number of worker processes: ``workers``, or one per CPU when it is None (or 0)."""
+    return workers or os.cpu_count() or 1

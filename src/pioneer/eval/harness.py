@@ -32,6 +32,7 @@ from tqdm import tqdm
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.interrupt import deferred, kept
 from pioneer.io import check_regular_target, naming_path, output_dir, to_json
+from pioneer.parallel import worker_count
 from pioneer.seeds import evaluation_seed
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
@@ -407,7 +408,7 @@ def evaluate(
     records = read_records(path)
     done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
     todo = [t for t in _tasks(scenarios, policies, seeds, trials) if t.key not in done]
-    n_workers = workers or os.cpu_count() or 1
+    n_workers = worker_count(workers)
     stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
     total = len(done) + len(todo)
     with (

@@ -26,6 +26,7 @@ from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
 from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.parallel import worker_count
 
 __all__ = [
     "EPISODE_S",
@@ -183,7 +184,7 @@ def reproduce(
         ],
     )
     md += _table_iv(out, records)
-    md += _time_table(records, _workers(workers))
+    md += _time_table(records, worker_count(workers))
     figures = _figures(out, reward_tpl)
     elapsed = time.perf_counter() - t0
     episode_s = sum(float(r.get("wall_time_s", 0.0)) for r in records)
@@ -211,7 +212,7 @@ def _announce(
 
     from pioneer.eval.harness import EPISODES_FILE, read_records
 
-    n_workers = _workers(workers)
+    n_workers = worker_count(workers)
     per_row = len(SCENARIOS) * prof.seeds * prof.trials
     done = len(read_records(out / "eval" / EPISODES_FILE))
     total = per_row * len(rows)
@@ -226,12 +227,6 @@ def _announce(
         file=sys.stderr,
         flush=True,
     )
-
-
-def _workers(workers: int | None) -> int:
-    import os
-
-    return workers or os.cpu_count() or 1
 
 
 def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:

@@ -39,7 +39,6 @@ import fnmatch
 import io
 import json
 import math
-import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -67,7 +66,7 @@ from pioneer.learn.models import (
     save_student,
     train_student,
 )
-from pioneer.parallel import bounded_map, spawn_pool
+from pioneer.parallel import bounded_map, spawn_pool, worker_count
 from pioneer.seeds import dagger_seed
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
@@ -395,7 +394,7 @@ def run_dagger(
     cfg = config
     out = Path(out_dir)
     rewards = _prepare(cfg, out, reward)
-    n_workers = workers or os.cpu_count() or 1
+    n_workers = worker_count(workers)
     # Train on one thread: float32 sums depend on the thread count, and the weights must not
     # depend on --workers or the machine (the networks are small; threads gain little).
     torch.set_num_threads(1)

@@ -4,7 +4,7 @@
   substeps of the social-force model (:func:`~pioneer.sim.humans.sfm_substep`), the robot
   along its exact arc, and the swept collision checks of SPEC 1.3 (module docstring of
   :mod:`pioneer.sim.world`);
-- :func:`trajectory_kernel` — L calls of ``step_kernel`` in one call, recording each step's
+X
   robot pose, the humans as LiDAR circles and the running minimum clearances (the teacher's
   rollout, ``pioneer.sim.world.advance``): the same values without L Python calls, L state
   copies and L argument packs.
@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -174,58 +175,27 @@ def step_kernel(
 
 @njit(cache=True, error_model="numpy")
 def trajectory_kernel(
-    robot: F64,
-    cmd: F64,
-    cmd_out: F64,
-    v_min: float,
-    v_max: float,
-    omega_max: float,
-    goal: F64,
-    t: F64,
-    path: F64,
-    collided: B8,
-    reached: B8,
-    clear_out: F64,
-    wclear_out: F64,
-    hpos: F64,
-    hvel: F64,
-    hrad: F64,
-    hvpref: F64,
-    hwp: F64,
-    hnwp: I64,
-    hwpi: I64,
-    hstatus: NDArray[np.int8],
-    hdelay: F64,
-    hwait: I64,
-    hrelease: I64,
-    hreacts: B8,
-    hhome: F64,
-    walls: F64,
-    wall_tab: F64,
-    bounds: F64,
-    params: F64,
-    r_robot: float,
-    goal_tol: float,
-    dt: float,
-    n_sub: int,
+    step_args: tuple[Any, ...],  # the arguments of step_kernel (world.step_kernel_args)
+    robot: F64,  # (B, 3) the same arrays as in step_args, read after each step
+    hpos: F64,  # (B, N, 2)
+    hrad: F64,  # (B, N)
+    hstatus: NDArray[np.int8],  # (B, N)
+    clear_out: F64,  # (B,)
+    wclear_out: F64,  # (B,)
     poses: F64,  # (B, L, 3) out: the robot pose after each step
     circles: F64,  # (B, L, N, 3) out: the humans after each step as x, y, r (0: gone)
     clear_min: F64,  # (B,) out: the minimum of ``clear_out`` over the L steps
     wclear_min: F64,  # (B,) out: the minimum of ``wclear_out`` over the L steps
 ) -> None:
-    """L = ``poses.shape[1]`` steps of every copy, in place, each step recorded."""
+    """L = ``poses.shape[1]`` calls of ``step_kernel(*step_args)``, each step recorded from the
+    state arrays it advances in place."""
     n_b = robot.shape[0]
     n_h = hpos.shape[1]
     for b in range(n_b):
         clear_min[b] = np.inf
         wclear_min[b] = np.inf
     for k in range(poses.shape[1]):
-        step_kernel(
-            robot, cmd, cmd_out, v_min, v_max, omega_max, goal, t, path, collided, reached,
-            clear_out, wclear_out, hpos, hvel, hrad, hvpref, hwp, hnwp, hwpi, hstatus, hdelay,
-            hwait, hrelease, hreacts, hhome, walls, wall_tab, bounds, params, r_robot, goal_tol,
-            dt, n_sub,
-        )  # fmt: skip
+        step_kernel(*step_args)
         for b in range(n_b):
             poses[b, k, 0] = robot[b, 0]
             poses[b, k, 1] = robot[b, 1]

@@ -276,8 +276,11 @@ def advance(world: World, state: State, command: F64, dt: float, n_steps: int) -
     circles = np.empty((n_b, n_steps, n_h, 3))
     clear = np.empty(n_b)
     wclear = np.empty(n_b)
-    args = (*step_kernel_args(world, new, u, h_dt, n_sub), poses, circles, clear, wclear)
-    trajectory_kernel(*args)
+    trajectory_kernel(
+        step_kernel_args(world, new, u, h_dt, n_sub),
+        new.robot, new.h_pos, new.h_radius, new.h_status, new.clearance, new.wall_clearance,
+        poses, circles, clear, wclear,
+    )  # fmt: skip
     return Trajectory(new, poses, circles, clear, wclear)
 
 
