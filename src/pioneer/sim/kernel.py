@@ -4,7 +4,7 @@
   substeps of the social-force model (:func:`~pioneer.sim.humans.sfm_substep`), the robot
   along its exact arc, and the swept collision checks of SPEC 1.3 (module docstring of
   :mod:`pioneer.sim.world`);
-X
+- :func:`trajectory_kernel` — L calls of ``step_kernel`` in one call, recording each step's
   robot pose, the humans as LiDAR circles and the running minimum clearances (the teacher's
   rollout, ``pioneer.sim.world.advance``): the same values without L Python calls, L state
   copies and L argument packs.
