@@ -19,7 +19,7 @@ from pioneer.reward.default import default_reward
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.humans import ARRIVED, SocialForceConfig
 from pioneer.sim.scenarios import HumanSpec, Region, ScenarioConfig, get_scenario
-from pioneer.sim.world import SimConfig
+from pioneer.sim.world import SimConfig, advance
 from pioneer_testutils import make_state, open_world, room_world
 
 ABLATIONS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
@@ -126,23 +126,27 @@ def test_teacher_never_selects_a_candidate_predicted_to_collide(name, human_mode
 
 
 def test_the_feasibility_mask_overrides_the_best_score():
-    """In the human-ahead state the unmasked best score belongs to a colliding candidate."""
+    """In the human-ahead state the best score of rollouts driven on through their collisions
+    belongs to a colliding candidate (the teacher's rollout stops a colliding candidate, which
+    it then masks)."""
     world, state = _unsafe_states()["human-ahead"]
     teacher = LookaheadTeacher(None)
     d = teacher.decide(world, state)
-    ro = _rollout_of(teacher, world, state)
+    tr = advance(world, state.repeat(120), teacher.candidates, 0.3, 10)  # no stop
+    collided = tr.final.collided
+    np.testing.assert_array_equal(collided, _rollout_of(teacher, world, state).collided)
     d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
-    d_goal = ro.final_goal_distance
+    d_goal = np.linalg.norm(tr.final.goal - tr.poses[:, -1, :2], axis=1)
     total, _ = combine(
         np.zeros(120),
         goal_term(d_goal, d_total),
-        obstacle_term(ro.obs),
+        obstacle_term(tr.observations(world)),
         d_goal,
         d_total,
         RuleWeights(),
     )
-    assert ro.collided[int(np.argmax(total))]
-    assert d.terms["total"] == pytest.approx(np.max(np.where(ro.collided, -np.inf, total)))
+    assert collided[int(np.argmax(total))]
+    assert d.terms["total"] == pytest.approx(np.max(np.where(collided, -np.inf, total)))
     assert d.terms["total"] < np.max(total)
 
 

@@ -422,6 +422,49 @@ def test_advance_equals_repeated_steps_bit_for_bit(name):
     )
 
 
+def test_advance_stops_colliding_copies_and_keeps_the_others_bit_for_bit():
+    """``stop_at_collision``: a copy that never collides gets exactly the values of repeated
+    ``step``; a colliding copy is left at its collision step, whose records it repeats."""
+    scenario = get_scenario("hr-rl")
+    world = scenario.world()
+    rng = np.random.default_rng(5)
+    n_b, n_l = 60, 10
+    s0 = sample_state(scenario, rng).repeat(n_b)
+    u = np.stack([rng.uniform(0.1, 0.8, n_b), rng.uniform(-1.2, 1.2, n_b)], axis=1)
+    tr = advance(world, s0, u, dt=0.3, n_steps=n_l, stop_at_collision=True)
+    s, states = s0, []
+    for _ in range(n_l):
+        s = step(world, s, u, dt=0.3)
+        states.append(s)
+    hit = np.stack([x.collided for x in states], axis=1)  # (B, L)
+    first = np.where(hit.any(axis=1), hit.argmax(axis=1), n_l - 1)
+    assert 0 < hit[:, -1].sum() < n_b  # both kinds present
+    np.testing.assert_array_equal(tr.live_steps, first + 1)
+    obs_steps = observe_states(world, states).transpose(1, 0, 2)
+    obs = tr.observations(world)
+    for b in range(n_b):
+        kc = first[b]
+        for k in range(n_l):
+            src = states[min(k, kc)]
+            np.testing.assert_array_equal(tr.poses[b, k], src.robot[b])
+            np.testing.assert_array_equal(tr.circles[b, k, :, :2], src.h_pos[b])
+            np.testing.assert_array_equal(obs[b, k], obs_steps[b, min(k, kc)])
+        end = states[kc]
+        np.testing.assert_array_equal(tr.final.robot[b], end.robot[b])
+        np.testing.assert_array_equal(tr.final.h_pos[b], end.h_pos[b])
+        assert tr.final.collided[b] == hit[b, -1]
+        np.testing.assert_array_equal(
+            tr.clearance[b], np.min([x.clearance[b] for x in states[: kc + 1]])
+        )
+    # A copy collided from the start is never advanced.
+    s1 = s0.copy()
+    s1.collided[:] = True
+    frozen = advance(world, s1, u, dt=0.3, n_steps=3, stop_at_collision=True)
+    np.testing.assert_array_equal(frozen.live_steps, np.ones(n_b, dtype=np.int64))
+    assert states_equal(frozen.final, s1)
+    np.testing.assert_array_equal(frozen.poses, np.repeat(s1.robot[:, None], 3, axis=1))
+
+
 def test_advance_refuses_bad_arguments():
     world, state = _hr_rl_state()
     with pytest.raises(ConfigError, match="n_steps"):

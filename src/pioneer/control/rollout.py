@@ -5,6 +5,12 @@ at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states by :func:`pioneer.sim.world.adv
 of every candidate in one kernel call, each step recorded, with the values of L calls of
 :func:`~pioneer.sim.world.step`. Humans follow the privileged simulator model (they react to
 the robot) or, as an option, a constant-velocity prediction.
+
+A candidate predicted to collide is discarded by the teacher, so the privileged rollout stops
+it at its collision step: its records after that step repeat the collision state (a quarter
+of the teacher's copy-steps in the paper world are not simulated or observed; every
+non-colliding candidate's rollout is the same, bit for bit). The constant-velocity option
+keeps stepping colliding candidates.
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ class Rollout:
     """The predicted futures of C candidate commands over L steps."""
 
     commands: F64  # (C, 2)
-    robot: F64  # (C, L, 3) poses x_1 … x_L
+    robot: F64  # (C, L, 3) poses x_1 … x_L (a colliding candidate stops: module docstring)
     obs: NDArray[np.float32]  # (C, L, 29) observations o_1 … o_L
     collided: NDArray[np.bool_]  # (C,) a predicted collision (humans or walls)
     min_clearance: F64  # (C,) minimum swept clearance to any human [m]
@@ -78,7 +84,7 @@ def rollout(
     c = commands.shape[0]
     s = state.repeat(c)
     if human_model == "privileged":
-        tr = advance(world, s, commands, dt, n_steps)
+        tr = advance(world, s, commands, dt, n_steps, stop_at_collision=True)
         obs = tr.observations(world)
         return Rollout(
             commands, tr.poses, obs, tr.final.collided.copy(), tr.clearance,

@@ -7,7 +7,8 @@
 - :func:`trajectory_kernel` — L calls of ``step_kernel`` in one call, recording each step's
   robot pose, the humans as LiDAR circles and the running minimum clearances (the teacher's
   rollout, ``pioneer.sim.world.advance``): the same values without L Python calls, L state
-  copies and L argument packs.
+  copies and L argument packs. Optionally a copy stops at its first collision (the teacher
+  discards a colliding candidate, so a quarter of its copy-steps need not be simulated).
 """
 
 from __future__ import annotations
@@ -71,8 +72,13 @@ def step_kernel(
     goal_tol: float,
     dt: float,
     n_sub: int,
+    skip_collided: bool,
 ) -> None:
-    """One step of every copy, in place (the arguments of ``world.step_kernel_args``)."""
+    """One step of every copy, in place (the arguments of ``world.step_kernel_args``).
+
+    With ``skip_collided`` a copy whose ``collided`` flag is already set is left as it is
+    (the teacher's rollout: a candidate stops at its predicted collision).
+    """
     n_b = robot.shape[0]
     n_h = hpos.shape[1]
     m = walls.shape[0]
@@ -85,6 +91,8 @@ def step_kernel(
     wall_scr = np.empty((3, wall_tab.shape[1]))
     was_present = np.empty(n_h, dtype=np.bool_)
     for b in range(n_b):
+        if skip_collided and collided[b]:
+            continue
         x = robot[b, 0]
         y = robot[b, 1]
         th = robot[b, 2]
@@ -180,21 +188,32 @@ def trajectory_kernel(
     hpos: F64,  # (B, N, 2)
     hrad: F64,  # (B, N)
     hstatus: NDArray[np.int8],  # (B, N)
+    collided: B8,  # (B,)
     clear_out: F64,  # (B,)
     wclear_out: F64,  # (B,)
     poses: F64,  # (B, L, 3) out: the robot pose after each step
     circles: F64,  # (B, L, N, 3) out: the humans after each step as x, y, r (0: gone)
     clear_min: F64,  # (B,) out: the minimum of ``clear_out`` over the L steps
     wclear_min: F64,  # (B,) out: the minimum of ``wclear_out`` over the L steps
+    live_steps: I64,  # (B,) out: how many records of each copy are distinct (L, or fewer
+    # when step_args skips collided copies: 1 + the step of its collision)
 ) -> None:
     """L = ``poses.shape[1]`` calls of ``step_kernel(*step_args)``, each step recorded from the
-    state arrays it advances in place."""
+    state arrays it advances in place.
+
+    Where ``step_args`` skips collided copies, the records of a copy after its collision step
+    repeat that step's (the copy is left as it is); ``live_steps`` says how many records of
+    each copy are distinct.
+    """
+    stop = step_args[-1]  # step_kernel's skip_collided
     n_b = robot.shape[0]
     n_h = hpos.shape[1]
+    n_l = poses.shape[1]
     for b in range(n_b):
         clear_min[b] = np.inf
         wclear_min[b] = np.inf
-    for k in range(poses.shape[1]):
+        live_steps[b] = n_l
+    for k in range(n_l):
         step_kernel(*step_args)
         for b in range(n_b):
             poses[b, k, 0] = robot[b, 0]
@@ -206,3 +225,5 @@ def trajectory_kernel(
                 circles[b, k, i, 2] = hrad[b, i] if hstatus[b, i] != GONE else 0.0
             clear_min[b] = min(clear_min[b], clear_out[b])
             wclear_min[b] = min(wclear_min[b], wclear_out[b])
+            if stop and collided[b] and live_steps[b] == n_l:
+                live_steps[b] = k + 1

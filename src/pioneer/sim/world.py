@@ -242,28 +242,58 @@ def step(world: World, state: State, command: F64 | list[float], dt: float | Non
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Trajectory:
-    """L steps of B copies under constant commands (:func:`advance`), every step recorded."""
+    """L steps of B copies under constant commands (:func:`advance`), every step recorded.
 
-    final: State  # the copies after the L-th step
+    A copy stopped at its collision (``advance(…, stop_at_collision=True)``) keeps its
+    collision state: its records after the collision step repeat that step's.
+    """
+
+    final: State  # the copies after the L-th step (or at their collision step)
     poses: F64  # (B, L, 3) robot pose after each step
     circles: F64  # (B, L, N, 3) the humans after each step as LiDAR circles x, y, r (0: gone)
-    clearance: F64  # (B,) minimum swept human clearance over the L steps [m]
-    wall_clearance: F64  # (B,) minimum swept wall clearance over the L steps [m]
+    clearance: F64  # (B,) minimum swept human clearance over the simulated steps [m]
+    wall_clearance: F64  # (B,) minimum swept wall clearance over the simulated steps [m]
+    live_steps: NDArray[np.int64]  # (B,) distinct records per copy: L, or 1 + its collision step
 
     def observations(self, world: World) -> NDArray[np.float32]:
         """The noise-free observation after every step, ``(B, L, 29)`` float32: the values of
         :func:`observe_states` of the L recorded states (the teacher plans on noise-free rays,
-        see there)."""
+        see there). A stopped copy's repeated records are observed once and repeated."""
         n_b, n_l = self.poses.shape[:2]
-        poses = self.poses.reshape(n_b * n_l, 3)
-        goal = np.repeat(self.final.goal, n_l, axis=0)
-        circles = self.circles.reshape(n_b * n_l, self.circles.shape[2], 3)
-        return observe_arrays(world, poses, circles, goal).reshape(n_b, n_l, -1)
+        n_h = self.circles.shape[2]
+        if np.all(self.live_steps == n_l):
+            poses = self.poses.reshape(n_b * n_l, 3)
+            goal = np.repeat(self.final.goal, n_l, axis=0)
+            circles = self.circles.reshape(n_b * n_l, n_h, 3)
+            return observe_arrays(world, poses, circles, goal).reshape(n_b, n_l, -1)
+        live = np.arange(n_l)[None, :] < self.live_steps[:, None]  # (B, L)
+        obs = observe_arrays(
+            world,
+            self.poses[live],
+            self.circles[live],
+            np.repeat(self.final.goal, self.live_steps, axis=0),
+        )
+        # Record (b, k) is distinct record min(k, live_b − 1) of copy b; copy b's distinct
+        # records start at Σ_{b' < b} live_b' in ``obs``.
+        first = np.cumsum(self.live_steps) - self.live_steps
+        row = first[:, None] + np.minimum(np.arange(n_l)[None, :], self.live_steps[:, None] - 1)
+        return obs[row]
 
 
-def advance(world: World, state: State, command: F64, dt: float, n_steps: int) -> Trajectory:
+def advance(
+    world: World,
+    state: State,
+    command: F64,
+    dt: float,
+    n_steps: int,
+    stop_at_collision: bool = False,
+) -> Trajectory:
     """``n_steps`` calls of :func:`step` with the commands ``(B, 2)`` held, in one kernel call,
-    recording every step (bit for bit the values of the repeated ``step``; tested)."""
+    recording every step (bit for bit the values of the repeated ``step``; tested).
+
+    With ``stop_at_collision`` a copy is not advanced once it has collided (a planner discards
+    a colliding candidate): every copy that never collides gets the same values, bit for bit.
+    """
     h_dt = float(dt)
     check_positive("advance", "dt", h_dt)
     if n_steps < 1:
@@ -276,15 +306,18 @@ def advance(world: World, state: State, command: F64, dt: float, n_steps: int) -
     circles = np.empty((n_b, n_steps, n_h, 3))
     clear = np.empty(n_b)
     wclear = np.empty(n_b)
+    live = np.empty(n_b, dtype=np.int64)
     trajectory_kernel(
-        step_kernel_args(world, new, u, h_dt, n_sub),
-        new.robot, new.h_pos, new.h_radius, new.h_status, new.clearance, new.wall_clearance,
-        poses, circles, clear, wclear,
+        step_kernel_args(world, new, u, h_dt, n_sub, stop_at_collision),
+        new.robot, new.h_pos, new.h_radius, new.h_status, new.collided, new.clearance,
+        new.wall_clearance, poses, circles, clear, wclear, live,
     )  # fmt: skip
-    return Trajectory(new, poses, circles, clear, wclear)
+    return Trajectory(new, poses, circles, clear, wclear, live)
 
 
-def step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> tuple[Any, ...]:
+def step_kernel_args(
+    world: World, s: State, u: F64, dt: float, n_sub: int, skip_collided: bool = False
+) -> tuple[Any, ...]:
     """The arguments of ``kernel.step_kernel`` advancing ``s`` in place (also for benchmarks)."""
     robot = world.sim.robot
     return (
@@ -322,6 +355,7 @@ def step_kernel_args(world: World, s: State, u: F64, dt: float, n_sub: int) -> t
         world.sim.goal_tolerance,
         dt,
         n_sub,
+        skip_collided,
     )
 
 
