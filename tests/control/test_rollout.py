@@ -189,3 +189,20 @@ def test_constant_velocity_rollout_flags_an_overlap_at_the_horizon():
     assert gap < -0.1  # the predicted bodies overlap at the horizon ...
     assert ro.min_clearance[0] <= gap + 1e-9  # ... so the clearance must say so
     assert ro.collided[0]  # ... and the candidate must be infeasible
+
+
+@pytest.mark.parametrize("human_model", ["privileged", "constant_velocity"])
+def test_rollout_observes_a_subset_of_candidates_with_the_same_values(human_model):
+    """``observations(which)`` (what the teacher asks for: its feasible candidates) equals the
+    rows of ``obs``, whether or not ``obs`` was cast first."""
+    world = open_world()
+    state = make_state(
+        (0.0, 0.0, 0.0), goal=(4.0, 0.0), humans=[{"pos": (1.2, 0.1), "vel": (-0.4, 0.0)}]
+    )
+    cands = candidate_commands()
+    which = np.arange(len(cands)) % 3 == 1
+    assert rollout(world, state, cands, human_model=human_model).collided[which].any()
+    subset = rollout(world, state, cands, human_model=human_model).observations(which)
+    ro = rollout(world, state, cands, human_model=human_model)
+    np.testing.assert_array_equal(subset, ro.obs[which])
+    np.testing.assert_array_equal(ro.observations(which), ro.obs[which])

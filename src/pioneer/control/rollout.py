@@ -16,7 +16,9 @@ keeps stepping colliding candidates.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,15 +45,31 @@ def candidate_commands(
 
 @dataclasses.dataclass(frozen=True)
 class Rollout:
-    """The predicted futures of C candidate commands over L steps."""
+    """The predicted futures of C candidate commands over L steps.
+
+    The observations are cast when asked for: :attr:`obs` of every candidate, or
+    :meth:`observations` of some (the teacher observes only its feasible candidates; in the
+    paper world half of them collide).
+    """
 
     commands: F64  # (C, 2)
     robot: F64  # (C, L, 3) poses x_1 … x_L (a colliding candidate stops: module docstring)
-    obs: NDArray[np.float32]  # (C, L, 29) observations o_1 … o_L
     collided: NDArray[np.bool_]  # (C,) a predicted collision (humans or walls)
     min_clearance: F64  # (C,) minimum swept clearance to any human [m]
     min_wall_clearance: F64  # (C,) minimum swept clearance to walls [m]
     final: State  # the C states at the horizon
+    observe: Callable[[NDArray[np.bool_] | None], NDArray[np.float32]] = dataclasses.field(
+        repr=False, compare=False
+    )  # which (C,) or None → their observations (C', L, 29)
+
+    @functools.cached_property
+    def obs(self) -> NDArray[np.float32]:
+        """Observations o_1 … o_L of every candidate, (C, L, 29) float32."""
+        return self.observe(None)
+
+    def observations(self, which: NDArray[np.bool_]) -> NDArray[np.float32]:
+        """Observations of the candidates in ``which (C,)``, (C', L, 29) float32, in order."""
+        return self.obs[which] if "obs" in self.__dict__ else self.observe(which)
 
     @property
     def final_goal_distance(self) -> F64:
@@ -85,10 +103,9 @@ def rollout(
     s = state.repeat(c)
     if human_model == "privileged":
         tr = advance(world, s, commands, dt, n_steps, stop_at_collision=True)
-        obs = tr.observations(world)
         return Rollout(
-            commands, tr.poses, obs, tr.final.collided.copy(), tr.clearance,
-            tr.wall_clearance, tr.final,
+            commands, tr.poses, tr.final.collided.copy(), tr.clearance, tr.wall_clearance,
+            tr.final, functools.partial(tr.observations, world),
         )  # fmt: skip
     # Constant velocity: freeze the social-force model and move the humans along their current
     # velocity after each step, then check the robot against the moved humans too.
@@ -112,4 +129,7 @@ def rollout(
         np.minimum(clear, s.clearance, out=clear)
         np.minimum(wclear, s.wall_clearance, out=wclear)
     obs = np.ascontiguousarray(observe_states(world, states).transpose(1, 0, 2))  # (C, L, 29)
-    return Rollout(commands, robot, obs, s.collided.copy(), clear, wclear, s)
+    return Rollout(
+        commands, robot, s.collided.copy(), clear, wclear, s,
+        lambda which: obs if which is None else obs[which],
+    )  # fmt: skip

@@ -159,21 +159,21 @@ class LookaheadTeacher:
         d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
         d_goal = ro.final_goal_distance
         r_goal = goal_term(d_goal, d_total)
-        r_obs = obstacle_term(ro.obs)
         feasible = ~ro.collided & (ro.min_clearance >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
+        # Only candidates that can be chosen are observed and scored by the density: about half
+        # collide in the paper world, and the rays and the density are most of a decision's
+        # arithmetic. (Infeasible ones keep 0 for both terms; they score −∞.)
+        r_obs = np.zeros(c)
         r_den = np.zeros(c)
-        if self.density is not None and w.use_density and n_feasible:
-            # Only candidates that can be chosen: about half collide in the lobby, and the
-            # density is most of a decision's arithmetic. (Infeasible ones keep 0; they score −∞.)
-            feats = self._feature_map.from_rollout(ro.robot, ro.obs, ro.commands).reshape(
-                c, n_l, -1
-            )[feasible]
-            r_den[feasible] = (
-                self.density(feats.reshape(n_feasible * n_l, -1))
-                .reshape(n_feasible, n_l)
-                .mean(axis=1)
-            )
+        if n_feasible:
+            obs = ro.observations(feasible)
+            r_obs[feasible] = obstacle_term(obs)
+            if self.density is not None and w.use_density:
+                feats = self._feature_map.from_rollout(
+                    ro.robot[feasible], obs, ro.commands[feasible]
+                )
+                r_den[feasible] = self.density(feats).reshape(n_feasible, n_l).mean(axis=1)
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
         scored = np.where(feasible, total + extra, -np.inf)

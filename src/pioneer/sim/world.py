@@ -255,29 +255,34 @@ class Trajectory:
     wall_clearance: F64  # (B,) minimum swept wall clearance over the simulated steps [m]
     live_steps: NDArray[np.int64]  # (B,) distinct records per copy: L, or 1 + its collision step
 
-    def observations(self, world: World) -> NDArray[np.float32]:
+    def observations(
+        self, world: World, which: NDArray[np.bool_] | None = None
+    ) -> NDArray[np.float32]:
         """The noise-free observation after every step, ``(B, L, 29)`` float32: the values of
         :func:`observe_states` of the L recorded states (the teacher plans on noise-free rays,
-        see there). A stopped copy's repeated records are observed once and repeated."""
-        n_b, n_l = self.poses.shape[:2]
+        see there). ``which (B,)`` observes only those copies, ``(B', L, 29)`` in their order.
+        A stopped copy's repeated records are observed once and repeated."""
+        n_l = self.poses.shape[1]
         n_h = self.circles.shape[2]
-        if np.all(self.live_steps == n_l):
-            poses = self.poses.reshape(n_b * n_l, 3)
-            goal = np.repeat(self.final.goal, n_l, axis=0)
-            circles = self.circles.reshape(n_b * n_l, n_h, 3)
-            return observe_arrays(world, poses, circles, goal).reshape(n_b, n_l, -1)
-        live = np.arange(n_l)[None, :] < self.live_steps[:, None]  # (B, L)
+        poses, circles, goal, live = self.poses, self.circles, self.final.goal, self.live_steps
+        if which is not None:
+            poses, circles, goal, live = poses[which], circles[which], goal[which], live[which]
+        n_b = poses.shape[0]
+        if np.all(live == n_l):
+            return observe_arrays(
+                world,
+                poses.reshape(n_b * n_l, 3),
+                circles.reshape(n_b * n_l, n_h, 3),
+                np.repeat(goal, n_l, axis=0),
+            ).reshape(n_b, n_l, -1)
+        distinct = np.arange(n_l)[None, :] < live[:, None]  # (B, L)
         obs = observe_arrays(
-            world,
-            self.poses[live],
-            self.circles[live],
-            np.repeat(self.final.goal, self.live_steps, axis=0),
+            world, poses[distinct], circles[distinct], np.repeat(goal, live, axis=0)
         )
         # Record (b, k) is distinct record min(k, live_b − 1) of copy b; copy b's distinct
         # records start at Σ_{b' < b} live_b' in ``obs``.
-        first = np.cumsum(self.live_steps) - self.live_steps
-        row = first[:, None] + np.minimum(np.arange(n_l)[None, :], self.live_steps[:, None] - 1)
-        return obs[row]
+        first = np.cumsum(live) - live
+        return obs[first[:, None] + np.minimum(np.arange(n_l)[None, :], live[:, None] - 1)]
 
 
 def advance(
