@@ -57,7 +57,7 @@ class Rollout:
     collided: NDArray[np.bool_]  # (C,) a predicted collision (humans or walls)
     min_clearance: F64  # (C,) minimum swept clearance to any human [m]
     min_wall_clearance: F64  # (C,) minimum swept clearance to walls [m]
-    final: State  # the C states at the horizon
+    final: State  # the C states at the horizon (a colliding candidate: at its collision)
     observe: Callable[[NDArray[np.bool_] | None], NDArray[np.float32]] = dataclasses.field(
         repr=False, compare=False
     )  # which (C,) or None → their observations (C', L, 29)
