@@ -61,23 +61,23 @@ CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Tabl
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 
 # Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
-# VM in the paper profile of 2026-11-24, session 13 (mean over HR-RL and HL-RR; the report's
+# VM in the paper profile of 2026-11-24, session 14 (mean over HR-RL and HL-RR; the report's
 # "Where the time went", docs/performance.md). Only for the expected time that `reproduce`
 # reports before it starts; a policy not listed counts 0.1 s.
 EPISODE_S = {
-    "teacher": 0.979,
-    "teacher-no-density": 0.678,
-    "teacher-no-goal": 1.341,
-    "teacher-no-obstacle": 0.986,
-    "cvar-bf": 0.359,
-    "crowdnav++": 0.034,
-    "crowdnav++-il": 0.034,  # the same network as crowdnav++ (not in the profile)
-    "dwa": 0.073,
+    "teacher": 0.834,
+    "teacher-no-density": 0.374,
+    "teacher-no-goal": 1.218,
+    "teacher-no-obstacle": 0.728,
+    "cvar-bf": 0.394,
+    "crowdnav++": 0.039,
+    "crowdnav++-il": 0.039,  # the same network as crowdnav++ (not in the profile)
+    "dwa": 0.079,
     "sfm": 0.016,
-    "goal": 0.011,
-    "student-mdn": 0.072,
-    "student-mlp": 0.056,
-    "student-shield": 0.109,
+    "goal": 0.012,
+    "student-mdn": 0.076,
+    "student-mlp": 0.064,
+    "student-shield": 0.106,
 }
 
 
