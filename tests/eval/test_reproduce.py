@@ -57,22 +57,52 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
     assert f"the episodes ran for {total_min:.1f} min in all" in (smoke / "index.md").read_text()
 
 
-def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys):
-    from pioneer.experiments.reproduce import EPISODE_S, PROFILES, _announce, expected_seconds
+@pytest.mark.parametrize("warm", [True, False])
+def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys, monkeypatch, warm):
+    import pioneer.experiments.reproduce as rep
 
-    rows = ["teacher", "goal"]
-    per_episode = EPISODE_S["teacher"] + EPISODE_S["goal"]
-    assert expected_seconds(rows, 1000, 2) == pytest.approx(per_episode * 500)
-    assert expected_seconds(rows, 1000, 1) == pytest.approx(per_episode * 1000)
-    assert expected_seconds(["unknown"], 10, 1) == pytest.approx(1.0)
-    _announce("paper", PROFILES["paper"], rows, tmp_path, workers=2)
+    rows = ["teacher", "teacher-no-goal", "goal"]  # ≥ 10 min: whole minutes
+    per_episode = sum(rep.EPISODE_S[row] for row in rows)
+    assert rep.expected_seconds(rows, 1000, 2) == pytest.approx(per_episode * 500)
+    assert rep.expected_seconds(rows, 1000, 1) == pytest.approx(per_episode * 1000)
+    assert rep.expected_seconds(["unknown"], 10, 1) == pytest.approx(1.0)
+    monkeypatch.setattr(rep, "jit_cache_warm", lambda: warm)
+    rep._announce("paper", rep.PROFILES["paper"], rows, tmp_path, workers=2)
     line = capsys.readouterr().err.strip()
-    assert line.startswith("pioneer reproduce --profile paper: 2,000 episodes (0 done)")
-    paper, extra = EPISODE_S["teacher"] * 500 / 60, EPISODE_S["goal"] * 500 / 60
+    assert line.startswith("pioneer reproduce --profile paper: 3,000 episodes (0 done)")
+    paper = (rep.EPISODE_S["teacher"] + rep.EPISODE_S["teacher-no-goal"]) * 500 / 60
+    extra = rep.EPISODE_S["goal"] * 500 / 60
+    fixed = (rep.OVERHEAD_S + (0.0 if warm else rep.COLD_JIT_S)) / 60
+    compiling = "" if warm else ", compiling the kernels"
     assert (
-        f"expected ≈ {paper + extra:.0f} min (the paper's rows {paper:.0f}, the extra rows "
-        f"{extra:.0f}) with 2 worker(s)"
+        f"expected ≈ {paper + extra + fixed:.0f} min (the paper's rows {paper:.0f}, the extra "
+        f"rows {extra:.0f}, start-up{compiling} and report {fixed:.0f}) with 2 worker(s)"
     ) in line
+
+
+def test_a_short_run_is_announced_in_tenths_of_a_minute(tmp_path, capsys, monkeypatch):
+    import pioneer.experiments.reproduce as rep
+
+    monkeypatch.setattr(rep, "jit_cache_warm", lambda: False)
+    rep._announce("smoke", rep.PROFILES["smoke"], ["goal"], tmp_path, workers=1)
+    line = capsys.readouterr().err.strip()
+    episodes = rep.EPISODE_S["goal"] * 2 / 60
+    fixed = (rep.OVERHEAD_S + rep.COLD_JIT_S) / 60
+    assert f"expected ≈ {episodes + fixed:.1f} min (the paper's rows 0.0, the extra rows" in line
+    assert f"start-up, compiling the kernels and report {fixed:.1f})" in line
+
+
+def test_the_jit_cache_is_found_where_numba_keeps_it(tmp_path, monkeypatch):
+    from numba.core import config
+
+    from pioneer.experiments.reproduce import jit_cache_warm
+
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "numba"))
+    assert not jit_cache_warm()
+    index = tmp_path / "numba" / "work_src_pioneer_sim" / "kernel.step_kernel-39.py311.nbi"
+    index.parent.mkdir(parents=True)
+    index.write_bytes(b"")
+    assert jit_cache_warm()
 
 
 def test_the_report_says_where_the_time_went(smoke: Path) -> None:

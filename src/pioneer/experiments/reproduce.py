@@ -34,6 +34,7 @@ __all__ = [
     "PROFILES",
     "Profile",
     "expected_seconds",
+    "jit_cache_warm",
     "reproduce",
     "row_times",
 ]
@@ -81,11 +82,33 @@ EPISODE_S = {
 }
 
 
+# Fixed costs of a run [s] on the reference VM, beside its episodes (session 15: `make demo`
+# in a fresh clone, 125 s, and the same run again, 97 s, against 79 s of expected episodes):
+# starting the workers and writing the tables, figures and Table IV; and compiling the numba
+# kernels when their on-disk cache is empty, as in a fresh clone (every worker compiles).
+OVERHEAD_S = 15.0
+COLD_JIT_S = 30.0
+
+
 def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -> float:
     """The expected wall time [s] of ``episodes_per_row`` episodes of each policy row on
     ``workers`` cores like the reference VM's (:data:`EPISODE_S`)."""
     cpu = sum(EPISODE_S.get(row, 0.1) for row in rows) * episodes_per_row
     return cpu / max(workers, 1)
+
+
+def jit_cache_warm() -> bool:
+    """Whether numba's on-disk cache already holds the simulator's step kernel (else the first
+    episode of every worker compiles it: :data:`COLD_JIT_S`)."""
+    from numba.core import config
+
+    import pioneer.sim.kernel as kernel
+
+    root = Path(config.CACHE_DIR) if config.CACHE_DIR else Path(kernel.__file__).parent
+    pattern = "kernel.step_kernel-*.nbi"
+    if config.CACHE_DIR:
+        return root.is_dir() and any(root.rglob(pattern))
+    return any((root / "__pycache__").glob(pattern))
 
 
 def row_times(records: Sequence[dict[str, Any]]) -> dict[str, tuple[int, float]]:
@@ -219,10 +242,19 @@ def _announce(
     left = 1.0 - done / total
     paper = expected_seconds([r for r in rows if r in PAPER_ROWS], per_row, n_workers) * left
     extra = expected_seconds([r for r in rows if r not in PAPER_ROWS], per_row, n_workers) * left
+    cold = not jit_cache_warm()
+    fixed = OVERHEAD_S + (COLD_JIT_S if cold else 0.0)
+    total_s = paper + extra + fixed
+    digits = 1 if total_s < 600 else 0  # short runs in tenths of a minute
+
+    def minutes(sec: float) -> str:
+        return f"{sec / 60:.{digits}f}"
+
     print(
         f"pioneer reproduce --profile {profile}: {total:,} episodes ({done:,} done), expected "
-        f"≈ {(paper + extra) / 60:.0f} min (the paper's rows {paper / 60:.0f}, the extra rows "
-        f"{extra / 60:.0f}) with {n_workers} worker(s) on a machine like the reference 2-core "
+        f"≈ {minutes(total_s)} min (the paper's rows {minutes(paper)}, the extra rows "
+        f"{minutes(extra)}, start-up{', compiling the kernels' if cold else ''} and report "
+        f"{minutes(fixed)}) with {n_workers} worker(s) on a machine like the reference 2-core "
         "VM (docs/performance.md)",
         file=sys.stderr,
         flush=True,
