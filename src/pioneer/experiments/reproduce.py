@@ -104,11 +104,11 @@ def jit_cache_warm() -> bool:
 
     import pioneer.sim.kernel as kernel
 
-    root = Path(config.CACHE_DIR) if config.CACHE_DIR else Path(kernel.__file__).parent
     pattern = "kernel.step_kernel-*.nbi"
-    if config.CACHE_DIR:
-        return root.is_dir() and any(root.rglob(pattern))
-    return any((root / "__pycache__").glob(pattern))
+    cache_dir = str(getattr(config, "CACHE_DIR", "") or "")  # NUMBA_CACHE_DIR, read by numba
+    if cache_dir:
+        return Path(cache_dir).is_dir() and any(Path(cache_dir).rglob(pattern))
+    return any((Path(kernel.__file__).parent / "__pycache__").glob(pattern))
 
 
 def row_times(records: Sequence[dict[str, Any]]) -> dict[str, tuple[int, float]]:
