@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import (
-    ENV_ID,
     SCENARIO,
     SEED,
     Case,
@@ -136,25 +135,15 @@ def bench_teacher_decision(plan: Plan) -> Result:
 
 
 def _teacher_episode_states(seed: int, every: int) -> list[tuple[Any, Any]]:
-    """(world, state) of every ``every``-th step of the HR-RL teacher's seeded episode: states
-    as the teacher meets them (people in the door, candidates colliding), not one scene."""
-    import gymnasium as gym
-
+    """(world, state) of every ``every``-th decision of the HR-RL teacher's seeded episode:
+    states as the teacher meets them (people in the door, candidates colliding), not one scene."""
     from pioneer.control.teacher import make_teacher
+    from pioneer.eval.episode import run_episode
 
-    env = gym.make(ENV_ID)
-    teacher = make_teacher(SCENARIO)
-    obs, info = env.reset(seed=seed)
-    teacher.reset(info, np.random.default_rng(seed))
-    visited: list[tuple[Any, Any]] = []
-    for k in range(10_000):
-        if k % every == 0:
-            visited.append((info["world"], info["state"]))
-        obs, _, terminated, truncated, info = env.step(teacher.act(obs, info))
-        if terminated or truncated:
-            break
-    env.close()
-    return visited
+    _, trajectory = run_episode(SCENARIO, make_teacher(SCENARIO), seed, record=True)
+    assert trajectory is not None
+    decided = trajectory.states[:-1]  # the last state ends the episode: no decision there
+    return [(trajectory.world, state) for state in decided[::every]]
 
 
 class _TimedPolicy:
