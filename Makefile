@@ -8,9 +8,11 @@ STAMP  := $(VENV)/.installed
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade "pip>=24"
-	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[dev,bench]"
+	@echo "installing into $(VENV) (pip's output: $(VENV)/install.log)"
+	@{ $(PY) -m pip install --upgrade "pip>=24" \
+	  && $(PY) -m pip install "torch==2.13.0" \
+	  && $(PY) -m pip install -e ".[dev,bench]"; } > $(VENV)/install.log 2>&1 \
+	  || { tail -n 40 $(VENV)/install.log; echo "install failed: see $(VENV)/install.log"; exit 1; }
 	@touch $(STAMP)
 
 ## Run the main job on the shipped defaults (writes into out/demo).

@@ -1,4 +1,5 @@
-"""Metrics over seeds with Student-t 95% intervals, and the paper-style tables (SPEC 7)."""
+"""Metrics with 95 % intervals (Student t over seeds from three seeds on, Wilson score and t
+over episodes below), and the paper-style tables."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from pioneer.eval.metrics import METRICS, mean_ci, summarize
-from pioneer.eval.tables import PAPER, csv_table, markdown_table, table_rows
+from pioneer.eval.metrics import METRICS, RANGES, RATES, mean_ci, summarize
+from pioneer.eval.tables import PAPER, csv_table, interval_note, markdown_table, table_rows
+from pioneer.stats import wilson_interval
 
 
 def _rec(seed, trial, event, time_s, path, clear=0.5, close=0.0, scenario="hr-rl", pol="teacher"):
@@ -74,18 +76,26 @@ def test_summary_matches_the_hand_computed_per_seed_values():
     assert (s["scenario"], s["policy"], s["episodes"], s["seeds"]) == ("hr-rl", "teacher", 8, 3)
     assert set(METRICS) <= set(s)
     assert set(PER_SEED) == set(METRICS)
+    assert s["interval"] == "seeds"
     for metric, values in PER_SEED.items():
         mean, ci = _reference(values)
+        low, high = RANGES[metric]
         assert s[metric]["mean"] == pytest.approx(mean, rel=1e-12), metric
         assert s[metric]["ci95"] == pytest.approx(ci, rel=1e-12), metric
+        assert s[metric]["lo"] == pytest.approx(max(low, mean - ci), rel=1e-12), metric
+        assert s[metric]["hi"] == pytest.approx(min(high, mean + ci), rel=1e-12), metric
     # spot-check the interval against a number computed by hand: t(0.975, 2) = 4.302653
     assert s["success_rate"]["ci95"] == pytest.approx(4.302653 * 28.867513 / math.sqrt(3), 1e-6)
     # rates add up per seed, hence on average
     total = sum(s[k]["mean"] for k in ("success_rate", "collision_rate", "timeout_rate"))
     assert total == pytest.approx(100.0)
-    g = summary["hr-rl/goal"]
-    assert g["success_rate"] == {"mean": 100.0, "ci95": 0.0}  # one seed: no interval
+    g = summary["hr-rl/goal"]  # one seed, one episode: Wilson over episodes
+    assert g["interval"] == "episodes"
+    lo, hi = wilson_interval(1, 1)
+    assert g["success_rate"]["mean"] == 100.0
+    assert (g["success_rate"]["lo"], g["success_rate"]["hi"]) == (100 * lo, 100 * hi)
     assert g["time_mean_s"]["mean"] == 9.0
+    assert g["time_mean_s"]["lo"] == g["time_mean_s"]["hi"] == 9.0  # one value: no interval
 
 
 def test_success_only_and_all_episode_variants_differ():
@@ -104,8 +114,8 @@ def test_no_success_at_all_gives_nan_without_warnings():
         rows = table_rows("I", {"hr-rl/teacher": s}, ["hr-rl"], ["teacher"])
         md = markdown_table(rows, "T")
         text = csv_table(rows, "I")
-    assert s["success_rate"] == {"mean": 0.0, "ci95": 0.0}
-    assert s["collision_rate"] == {"mean": 100.0, "ci95": 0.0}
+    assert s["success_rate"] == {"mean": 0.0, "ci95": 0.0, "lo": 0.0, "hi": 0.0}
+    assert s["collision_rate"] == {"mean": 100.0, "ci95": 0.0, "lo": 100.0, "hi": 100.0}
     for k in ("time_mean_s", "path_length_mean_m"):
         assert math.isnan(s[k]["mean"]) and math.isnan(s[k]["ci95"])
     assert s["time_mean_all_s"]["mean"] == pytest.approx(2.5)
@@ -160,21 +170,25 @@ def test_markdown_table_shows_the_paper_numbers_beside_ours():
     md = markdown_table(rows, "Table I")
     lines = md.strip().splitlines()
     assert lines[0] == "**Table I**"
-    assert lines[2].startswith("| Scenario | Method | SR")
-    assert len(lines) == 4 + len(rows)
+    assert lines[4].startswith("| Scenario | Method | SR")
+    assert len(lines) == 6 + len(rows)
     teacher = next(x for x in lines if "| teacher |" in x)
     s = summary["hr-rl/teacher"]
     assert "| HR-RL |" in teacher
     assert "99.4 / 12.24 / 3.74" in teacher
-    assert f"{s['success_rate']['mean']:.1f} ± {s['success_rate']['ci95']:.1f}" in teacher
-    assert "33.3 ± " in teacher
-    assert f"{s['time_mean_s']['mean']:.2f} ± {s['time_mean_s']['ci95']:.2f}" in teacher
-    assert "12.50 ± " in teacher
-    assert f"{s['path_length_mean_m']['mean']:.2f} ± " in teacher
+    # 3 seeds: t over seeds; 33.3 ± 71.7 would leave 0–100 %, so it is printed clipped
+    assert "| 33.3 [0.0, 100.0] |" in teacher
+    mc = s["min_clearance_m"]  # may be negative: never clipped, printed ± as over seeds
+    assert f"| {mc['mean']:.2f} ± {mc['ci95']:.2f} |" in teacher
+    assert "| 12.50 [0.00, " in teacher  # TT over 2 seeds with successes, clipped at 0
     assert teacher.rstrip(" |").endswith("8")  # episodes
     goal = next(x for x in lines if "| goal |" in x)
-    assert "| 100.0 |" in goal  # a zero-width interval is not printed
+    lo, _ = wilson_interval(2, 2)  # 2 seeds: Wilson over the 2 episodes
+    assert f"| 100.0 [{100 * lo:.1f}, 100.0] |" in goal
+    assert "| 8.00 |" in goal  # two equal times: a zero-width interval is not printed
     assert "| – |" in goal  # no paper numbers for this row
+    assert lines[2] == interval_note(rows)
+    assert "over 3 seeds (Student t)" in lines[2] and "Wilson" in lines[2]
 
 
 def test_csv_table_has_our_values_and_the_papers():
@@ -196,3 +210,65 @@ def test_csv_table_has_our_values_and_the_papers():
     )
     assert g["method"] == "goal"
     assert g["paper_sr"] == g["paper_tt_s"] == g["paper_pl_m"] == ""
+
+
+def _events(n_seeds, trials, rng):
+    """Random records: events, times and clearances of ``n_seeds`` × ``trials`` episodes."""
+    events = rng.choice(["success", "collision", "timeout"], size=(n_seeds, trials))
+    return [
+        _rec(
+            seed,
+            t,
+            str(events[seed, t]),
+            float(rng.uniform(5, 30)),
+            float(rng.uniform(2, 9)),
+            float(rng.uniform(-0.3, 2.0)),
+            float(rng.uniform(0, 3)),
+        )
+        for seed in range(n_seeds)
+        for t in range(trials)
+    ]
+
+
+@pytest.mark.parametrize("n_seeds", [1, 2])
+def test_fewer_than_three_seeds_give_intervals_over_episodes(n_seeds):
+    """Two seeds would give t(0.975, 1) = 12.7: the interval is over the episodes instead,
+    Wilson for the rates and Student t for the times (written here independently)."""
+    recs = _events(n_seeds, 10, np.random.default_rng(n_seeds))
+    s = summarize(recs)["hr-rl/teacher"]
+    assert s["interval"] == "episodes" and s["seeds"] == n_seeds
+    for metric, event in zip(RATES, ("success", "collision", "timeout"), strict=True):
+        k = sum(r["event"] == event for r in recs)
+        lo, hi = wilson_interval(k, len(recs))
+        assert s[metric]["mean"] == pytest.approx(100 * k / len(recs))
+        assert (s[metric]["lo"], s[metric]["hi"]) == (
+            pytest.approx(100 * lo),
+            pytest.approx(100 * hi),
+        )
+    times = [r["time_s"] for r in recs if r["event"] == "success"]
+    mean, half = _reference(times)
+    assert s["time_mean_s"]["mean"] == pytest.approx(mean)
+    assert s["time_mean_s"]["ci95"] == pytest.approx(half)
+
+
+@pytest.mark.parametrize("n_seeds", [1, 2, 3, 5])
+@pytest.mark.parametrize("trials", [1, 2, 5])
+def test_no_interval_exceeds_its_quantitys_range(n_seeds, trials):
+    rng = np.random.default_rng(100 * n_seeds + trials)
+    for _ in range(20):
+        s = summarize(_events(n_seeds, trials, rng))["hr-rl/teacher"]
+        for metric in METRICS:
+            low, high = RANGES[metric]
+            cell = s[metric]
+            if math.isfinite(cell["mean"]):
+                assert low <= cell["lo"] <= cell["mean"] <= cell["hi"] <= high, (metric, cell)
+
+
+def test_the_table_says_over_what_its_intervals_are():
+    two = summarize(_events(2, 10, np.random.default_rng(0)))
+    rows = table_rows("I", two, ["hr-rl"], ["teacher"])
+    note = interval_note(rows)
+    assert "over episodes (2 seeds" in note and "Wilson" in note and "over 2 seeds" not in note
+    five = summarize(_events(5, 4, np.random.default_rng(0)))
+    note = interval_note(table_rows("I", five, ["hr-rl"], ["teacher"]))
+    assert "over 5 seeds (Student t)" in note and "Wilson" not in note

@@ -9,6 +9,7 @@ import pytest
 
 from pioneer.cli import main
 from pioneer.eval.harness import read_records
+from pioneer.eval.metrics import RANGES
 from pioneer.experiments.reproduce import BASELINES, CLASSIC, SCENARIOS, SHIELD, STUDENTS, TEACHERS
 
 
@@ -45,6 +46,18 @@ def test_the_report_has_tables_i_to_iv_and_its_figures(smoke: Path) -> None:
         assert (smoke / "figures" / fig).stat().st_size > 0
     for name in ("summary.json", "summary.md", "summary.csv"):
         assert (smoke / name).stat().st_size > 0
+
+
+def test_no_interval_in_the_report_exceeds_its_quantitys_range(smoke: Path) -> None:
+    """One seed: the intervals are over episodes (Wilson for rates) and say so."""
+    summary = json.loads((smoke / "summary.json").read_text())
+    for entry in summary.values():
+        assert entry["interval"] == "episodes"
+        for metric, (low, high) in RANGES.items():
+            cell = entry[metric]
+            if cell["mean"] is not None:
+                assert low <= cell["lo"] <= cell["mean"] <= cell["hi"] <= high, (metric, cell)
+    assert "95 % CI over episodes (1 seed," in (smoke / "index.md").read_text()
 
 
 def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:

@@ -4,7 +4,9 @@ The behaviour tests check physics; this one pins *the values*, so a refactor or 
 optimisation of the step kernel, the social-force model or the LiDAR that changes any
 trajectory fails here instead of silently changing every dataset, teacher label and result
 made with it. Continuous values are compared to 1e-9 (a different CPU's libm may differ in
-the last bits; over 25 steps that stays far below this), discrete ones exactly.
+the last bits; over 25 steps that stays far below this), discrete ones exactly: a collision
+flag could only flip where a clearance lies within that tolerance of 0, and
+``test_discrete_outcomes_are_no_near_ties`` checks that none does (the closest is 3·10⁻⁴ m).
 
 Two references: ``regression.npz`` was made before the paper world existed and pins the
 compact world (``hr-rl-compact``, ``hl-rr-compact``; stored under the names ``hr-rl`` and
@@ -98,6 +100,19 @@ def test_the_reference_covers_humans_walls_and_collisions(reference):
     assert any(
         np.isfinite(reference[f"{n}/{s}/wall_clearance"]).all() for n in SCENARIOS for s in SEEDS
     )
+
+
+NEAR_TIE = 1e-6  # [m] a clearance this close to 0 could flip a collision flag between CPUs
+
+
+def test_discrete_outcomes_are_no_near_ties(reference, paper_reference):
+    """Every stored clearance is far from 0 compared with the continuous tolerance, so the
+    collision flags are stable to last-bit differences and may be compared exactly."""
+    for ref in (reference, paper_reference):
+        for key, value in ref.items():
+            if key.endswith(("/clearance", "/wall_clearance")):
+                finite = value[np.isfinite(value)]
+                assert np.all(np.abs(finite) > NEAR_TIE), key
 
 
 if __name__ == "__main__":

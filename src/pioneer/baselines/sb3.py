@@ -80,7 +80,8 @@ def _make_callback(out: Path, total: int, progress: bool) -> Any:
     """An SB3 callback that keeps the learning curve (appended to ``curve.csv`` after every
     rollout) and a progress bar."""
     from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
+
+    from pioneer.progress import progress_bar
 
     class _Curve(BaseCallback):
         def __init__(self) -> None:
@@ -89,7 +90,7 @@ def _make_callback(out: Path, total: int, progress: bool) -> Any:
             self.window: list[tuple[float, str]] = []
             self.episodes = 0
             self.t0 = time.perf_counter()
-            self.bar = tqdm(total=total, unit="step", desc="sb3-ppo", disable=not progress)
+            self.bar = progress_bar(total=total, unit="step", desc="sb3-ppo", enabled=progress)
 
         def _on_step(self) -> bool:
             infos = self.locals.get("infos", [])

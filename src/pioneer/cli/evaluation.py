@@ -123,8 +123,7 @@ class Run:
         return policy
 
     def _draw(self, scenario: ScenarioConfig, policy: Policy, traj: Trajectory, event: str) -> None:
-        from tqdm import tqdm
-
+        from pioneer.progress import progress_bar
         from pioneer.sim.world import scan
         from pioneer.viz import plot_trajectory, render_frame, save_gif
 
@@ -132,7 +131,7 @@ class Run:
         if self.gif:
             robot = traj.robot
             frames = []
-            for k, st in enumerate(tqdm(states, desc="frames", unit="f", disable=None)):
+            for k, st in enumerate(progress_bar(states, desc="frames", unit="f")):
                 rays = scan(world, st)[0] if self.lidar else None
                 frames.append(render_frame(world, st, rays, trail=robot[: k + 1, :2]))
             save_gif(frames, self.gif, fps=1.0 / scenario.sim.dt)

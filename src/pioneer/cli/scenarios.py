@@ -58,13 +58,13 @@ class Scenarios:
 
     def _draw(self, configs: dict[str, ScenarioConfig], out: Path) -> None:
         import numpy as np
-        from tqdm import tqdm
 
+        from pioneer.progress import progress_bar
         from pioneer.sim.scenarios import sample_state
         from pioneer.viz import plot_trajectory
 
         output_dir(out)
-        for name, cfg in tqdm(configs.items(), desc="layouts", unit="png", disable=None):
+        for name, cfg in progress_bar(configs.items(), desc="layouts", unit="png"):
             state = sample_state(cfg, np.random.default_rng(self.seed))
             title = f"{name} · initial state, seed {self.seed}"
             plot_trajectory(cfg.world(), [state], out / f"{name}.png", title=title)

@@ -14,12 +14,12 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from pioneer.control.policy import Policy
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, expect
+from pioneer.progress import progress_bar
 from pioneer.reward.dataset import Dataset
 from pioneer.seeds import training_seed
 from pioneer.sim.scenarios import get_scenario
@@ -107,7 +107,7 @@ def generate(
         make: Callable[[int], Policy], want: int, gamma: float, offset: int, label: str
     ) -> None:
         got = 0
-        bar = tqdm(total=want, desc=f"{cfg.name} {label}", unit="sample", disable=not progress)
+        bar = progress_bar(total=want, desc=f"{cfg.name} {label}", unit="sample", enabled=progress)
         for k in range(MAX_EPISODES):
             if got >= want:
                 break

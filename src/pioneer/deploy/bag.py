@@ -32,6 +32,7 @@ from pioneer.deploy.runtime import Decision, StudentRuntime
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
 from pioneer.io import atomic_path
 from pioneer.laser import LidarConfig
+from pioneer.progress import progress_bar
 
 __all__ = [
     "CSV_COLUMNS",
@@ -278,7 +279,7 @@ def replay_bag(
     bag = Path(bag_path)
     _check_bag(bag)
     runtime = _runtime(model_onnx, lidar)
-    tqdm = _tqdm()
+    _tqdm()  # the [ros] extra's tqdm, or one line naming it
     reader = _open_reader(bag)
     from rosbags.highlevel import AnyReaderError
 
@@ -295,9 +296,7 @@ def replay_bag(
         with (
             atomic_path(Path(out_csv)) as tmp,
             tmp.open("w", newline="") as fh,
-            tqdm(
-                total=n_scans, desc="scans", unit="scan", disable=None if progress else True
-            ) as bar,
+            progress_bar(total=n_scans, desc="scans", unit="scan", enabled=progress) as bar,
         ):
             out = csv.writer(fh)
             out.writerow(CSV_COLUMNS)

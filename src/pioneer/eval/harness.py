@@ -27,12 +27,11 @@ from collections.abc import Callable, Generator, Sequence
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.interrupt import deferred, kept
 from pioneer.io import check_regular_target, naming_path, output_dir, to_json
 from pioneer.parallel import worker_count
+from pioneer.progress import progress_bar
 from pioneer.seeds import evaluation_seed
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
@@ -418,8 +417,8 @@ def evaluate(
         next(stream)  # every policy built before the first episode and the records file
         with (
             open(check_regular_target(path), "a") as fh,
-            tqdm(
-                total=total, initial=len(done), desc="episodes", unit="ep", disable=not progress
+            progress_bar(
+                total=total, initial=len(done), desc="episodes", unit="ep", enabled=progress
             ) as bar,
         ):
             for rec in stream:

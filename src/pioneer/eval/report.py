@@ -26,9 +26,7 @@ def write_summary(
     if tables is None:
         all_scen = sorted({v["scenario"] for v in summary.values()})
         all_pols = sorted({v["policy"] for v in summary.values()})
-        tables = [
-            ("I", "Navigation performance (ours: mean ± 95% CI over seeds)", all_scen, all_pols)
-        ]
+        tables = [("I", "Navigation performance", all_scen, all_pols)]
     md_parts: list[str] = []
     csv_parts: list[str] = []
     for table, title, scenarios, policies in tables:

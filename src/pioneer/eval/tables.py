@@ -8,7 +8,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["PAPER", "TableRow", "csv_table", "markdown_table", "table_rows"]
+__all__ = ["PAPER", "TableRow", "csv_table", "interval_note", "markdown_table", "table_rows"]
 
 # Paper values: (SR %, TT s, PL m) per (table, scenario, row label). Tables I–III.
 PAPER: dict[tuple[str, str, str], tuple[float, float, float]] = {
@@ -33,11 +33,40 @@ PAPER: dict[tuple[str, str, str], tuple[float, float, float]] = {
 TableRow = dict[str, Any]
 
 
-def _fmt(mean: float, ci: float, digits: int) -> str:
+def _fmt(cell: Mapping[str, float], digits: int) -> str:
+    """``mean ± half`` for a symmetric interval, ``mean [lo, hi]`` for an asymmetric one (a
+    Wilson interval, or one clipped to its quantity's range), ``mean`` for none."""
+    mean = cell.get("mean")
     if mean is None or not math.isfinite(mean):
         return "–"
+    lo, hi = cell.get("lo", math.nan), cell.get("hi", math.nan)
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo <= 0.0:
+        return f"{mean:.{digits}f}"
+    if abs((mean - lo) - (hi - mean)) < 0.5 * 10.0**-digits:
+        return f"{mean:.{digits}f} ± {(hi - lo) / 2:.{digits}f}"
+    return f"{mean:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def interval_note(rows: Sequence[TableRow]) -> str:
+    """One sentence saying over what the table's intervals were computed."""
+    kinds = {(r["interval"], r["seeds"]) for r in rows}
+    over_seeds = {n for k, n in kinds if k == "seeds"}
+    over_episodes = {n for k, n in kinds if k == "episodes"}
+    parts = []
+    if over_seeds:
+        n = "/".join(str(x) for x in sorted(over_seeds))
+        parts.append(f"95 % CI over {n} seeds (Student t)")
+    if over_episodes:
+        n = "/".join(str(x) for x in sorted(over_episodes))
+        parts.append(
+            f"95 % CI over episodes ({n} seed{'s' if over_episodes != {1} else ''}, too few "
+            f"for an interval over seeds: Wilson score for rates, Student t for times and "
+            f"lengths)"
+        )
     return (
-        f"{mean:.{digits}f} ± {ci:.{digits}f}" if ci and math.isfinite(ci) else f"{mean:.{digits}f}"
+        "Mean ± half-width, or mean [low, high] where the interval is asymmetric; "
+        + "; ".join(parts)
+        + "."
     )
 
 
@@ -60,6 +89,8 @@ def table_rows(
                     "scenario": sc,
                     "method": pol,
                     "episodes": s["episodes"],
+                    "seeds": s["seeds"],
+                    "interval": s.get("interval", "seeds"),
                     "sr": s["success_rate"],
                     "tt": s["time_mean_s"],
                     "pl": s["path_length_mean_m"],
@@ -73,7 +104,8 @@ def table_rows(
 
 
 def markdown_table(rows: Sequence[TableRow], title: str) -> str:
-    """A Markdown table: SR, TT, PL (mean ± 95% CI over seeds) next to the paper's values."""
+    """A Markdown table: SR, TT, PL with 95 % intervals (:func:`interval_note` says over what)
+    next to the paper's values."""
     head = [
         "Scenario",
         "Method",
@@ -86,19 +118,22 @@ def markdown_table(rows: Sequence[TableRow], title: str) -> str:
         "min clearance (m)",
         "episodes",
     ]
-    out = [f"**{title}**", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    out = [f"**{title}**", ""]
+    if rows:
+        out += [interval_note(rows), ""]
+    out += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         p = r["paper"]
         cells = [
             r["scenario"].upper(),
             r["method"],
-            _fmt(r["sr"]["mean"], r["sr"]["ci95"], 1),
-            _fmt(r["tt"]["mean"], r["tt"]["ci95"], 2),
-            _fmt(r["pl"]["mean"], r["pl"]["ci95"], 2),
+            _fmt(r["sr"], 1),
+            _fmt(r["tt"], 2),
+            _fmt(r["pl"], 2),
             f"{p[0]:.1f} / {p[1]:.2f} / {p[2]:.2f}" if p else "–",
-            _fmt(r["collision"]["mean"], r["collision"]["ci95"], 1),
-            _fmt(r["timeout"]["mean"], r["timeout"]["ci95"], 1),
-            _fmt(r["min_clear"]["mean"], r["min_clear"]["ci95"], 2),
+            _fmt(r["collision"], 1),
+            _fmt(r["timeout"], 1),
+            _fmt(r["min_clear"], 2),
             str(r["episodes"]),
         ]
         out.append("| " + " | ".join(cells) + " |")
@@ -117,6 +152,9 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
             "episodes",
             "sr",
             "sr_ci95",
+            "sr_lo",
+            "sr_hi",
+            "interval",
             "tt_s",
             "tt_ci95",
             "pl_m",
@@ -139,6 +177,9 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
                 r["episodes"],
                 r["sr"]["mean"],
                 r["sr"]["ci95"],
+                r["sr"].get("lo"),
+                r["sr"].get("hi"),
+                r["interval"],
                 r["tt"]["mean"],
                 r["tt"]["ci95"],
                 r["pl"]["mean"],

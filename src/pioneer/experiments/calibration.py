@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from pioneer.errors import ConfigError, expect
 from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.progress import progress_bar
 from pioneer.seeds import validation_seed
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
@@ -186,7 +186,7 @@ def summarize_world(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 def _run(
     tasks: list[tuple[str, int, str]], workers: int, progress: bool
 ) -> Iterator[dict[str, Any]]:
-    bar = tqdm(total=len(tasks), desc="calibrate", unit="episode", disable=not progress)
+    bar = progress_bar(total=len(tasks), desc="calibrate", unit="episode", enabled=progress)
     if workers <= 1:
         for t in tasks:
             yield episode_statistics(t)

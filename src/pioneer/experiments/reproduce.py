@@ -192,7 +192,7 @@ def reproduce(
         [
             (
                 "I",
-                "Table I — navigation performance (ours: mean ± 95% CI over seeds)",
+                "Table I — navigation performance",
                 SCENARIOS,
                 ["teacher", *[p.row for p in extra]],
             ),

@@ -47,7 +47,6 @@ from typing import Any
 import numpy as np
 import torch
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from pioneer.config import Config
 from pioneer.deploy.mixture import ACTION_MODES
@@ -67,6 +66,7 @@ from pioneer.learn.models import (
     train_student,
 )
 from pioneer.parallel import bounded_map, spawn_pool, worker_count
+from pioneer.progress import progress_bar
 from pioneer.seeds import dagger_seed
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
@@ -405,7 +405,9 @@ def run_dagger(
     agg_obs: list[NDArray[np.float32]] = []
     agg_act: list[NDArray[np.float32]] = []
     model: Student | None = None
-    bar = tqdm(total=total, initial=done, desc="DAgger episodes", unit="ep", disable=not progress)
+    bar = progress_bar(
+        total=total, initial=done, desc="DAgger episodes", unit="ep", enabled=progress
+    )
     with kept(lambda: _kept(cfg, out)), bar, _pool(n_workers) as pool:
         for rnd in range(cfg.rounds + 1):
             bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")

@@ -77,6 +77,7 @@ from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Traine
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import Interrupted, deferred, kept
 from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.progress import progress_bar
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
 
@@ -132,14 +133,12 @@ def _train_loop(
     """PPO updates until the budget, with a progress bar and periodic checkpoints."""
     ppo = tr.ppo
     sc = tr.scenario
-    from tqdm import tqdm
-
-    bar = tqdm(
+    bar = progress_bar(
         total=ppo.updates * ppo.steps_per_update,
         initial=tr.env_steps,
         unit="step",
         desc=f"crowdnav++ {sc.name}",
-        disable=not progress,
+        enabled=progress,
         mininterval=2.0,
     )
     t_start, s_start = time.perf_counter(), tr.env_steps
