@@ -20,7 +20,7 @@ from pioneer.sim import State, get_scenario, sample_state
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 DEFAULT_OUTPUT = HERE / "results" / "latest.json"
-ENV_ID = "pioneer/ElevatorHRRL-v0"
+ENV_ID = "pioneer/ElevatorHRRL-v1"
 SCENARIO = "hr-rl"
 SEED = 20240601  # every random draw comes from np.random.default_rng(SEED + k)
 

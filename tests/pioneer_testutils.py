@@ -31,6 +31,7 @@ __all__ = [
     "make_state",
     "open_world",
     "room_world",
+    "sector_minima",
     "states_equal",
     "still_running",
     "stop_cli",
@@ -137,6 +138,20 @@ def wall_distances(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
     s = np.clip(((p - a) * e).sum(-1) / ll, 0.0, 1.0)
     closest = a + s[..., None] * e
     return np.linalg.norm(p - closest, axis=-1)
+
+
+def sector_minima(ranges: np.ndarray, group: int = 3) -> np.ndarray:
+    """Brute-force sector features ``(..., G / group)`` of beam ranges ``(..., G)`` with the
+    centred layout: sector k is the minimum of beams group·k − s … group·k − s + group − 1
+    (mod G), s = (group − 1) // 2 (beams 71, 0, 1 for sector 0 of 72 beams in threes)."""
+    r = np.asarray(ranges, dtype=float)
+    n = r.shape[-1]
+    shift = (group - 1) // 2
+    out = np.empty((*r.shape[:-1], n // group))
+    for k in range(n // group):
+        beams = [(group * k - shift + j) % n for j in range(group)]
+        out[..., k] = np.min(r[..., beams], axis=-1)
+    return out
 
 
 def assert_house_message(msg: str, *needles: str) -> None:

@@ -9,7 +9,7 @@ SCRIPT = """
 import sys
 import pioneer
 import gymnasium as gym
-env = gym.make("pioneer/ElevatorHRRL-v0")
+env = gym.make("pioneer/ElevatorHRRL-v1")
 env.reset(seed=0)
 env.action_space.seed(0)
 for _ in range(50):

@@ -1,7 +1,7 @@
 """PioneeR: social navigation from positive and negative demonstrations and rules.
 
-Importing the package registers the Gymnasium environments ``pioneer/ElevatorHRRL-v0``,
-``pioneer/ElevatorHLRR-v0`` and ``pioneer/StaticStudy-v0`` (by entry-point string). It imports
+Importing the package registers the Gymnasium environments ``pioneer/ElevatorHRRL-v1``,
+``pioneer/ElevatorHLRR-v1`` and ``pioneer/StaticStudy-v1`` (by entry-point string). It imports
 neither the simulator (numba) nor matplotlib nor torch; subpackages load what they need.
 The light robot install (``runtime/``, numpy and onnxruntime only) has no Gymnasium and no
 environments to register, so there the import registers nothing.

@@ -14,7 +14,11 @@ Observation (paper eq. 2), exactly in this order, float32:
 
     o = [r_1 … r_K, d_1, d_2, φ_1, φ_2, φ_g]
 
-- r_k = min of the g consecutive beams of sector k (K = G / g = 24),
+- r_k = min of the g consecutive beams of sector k (K = G / g = 24); with the default
+  ``sector_layout="centred"`` sector 0 is centred on the heading (beams G−1, 0, 1) and sector
+  k on beam g·k, so mirroring the world (x → −x) maps sector k to (K − k) mod K, φ to −φ and
+  ω to −ω: the observation is mirror-true. ``"heading_first"`` (beams 0, 1, 2 first) is the
+  earlier layout, kept for the compact world's reproducible results;
 - d_1 ≤ d_2 the two smallest raw beam ranges (ties: the lower beam index first), φ_1, φ_2
   their beam angles in (−π, π],
 - φ_g the goal bearing relative to the heading in (−π, π].
@@ -39,6 +43,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import typing
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,10 +55,12 @@ from pioneer.errors import ConfigError, DataError, expect
 __all__ = [
     "DEFAULT_UNSEEN",
     "OBS_DIM",
+    "SECTOR_LAYOUTS",
     "UNSEEN_RULES",
     "LidarConfig",
     "ScanReading",
     "beam_angles",
+    "mirror_observation",
     "observation_from_beams",
     "observation_from_scan",
     "observation_names",
@@ -62,6 +70,8 @@ __all__ = [
 ]
 
 OBS_DIM = 29
+SectorLayout = Literal["centred", "heading_first"]
+SECTOR_LAYOUTS: tuple[str, ...] = typing.get_args(SectorLayout)
 UNSEEN_RULES = ("obstacle", "nearest", "max_range")  # fills of unseen directions (module doc)
 DEFAULT_UNSEEN = "obstacle"
 
@@ -75,8 +85,18 @@ class LidarConfig(Config):
     n_nearest: int = 2  # b, nearest-obstacle descriptors
     max_range: float = 5.0  # [m]
     noise_std: float = 0.0  # [m] Gaussian range noise (0 = off)
+    sector_layout: SectorLayout = "centred"  # sector 0 centred on the heading (module doc)
 
     def __post_init__(self) -> None:
+        if self.sector_layout not in SECTOR_LAYOUTS:
+            raise ConfigError(
+                expect(
+                    "LidarConfig.sector_layout",
+                    f"one of {SECTOR_LAYOUTS}",
+                    self.sector_layout,
+                    'use "centred" (mirror-true) or "heading_first" (the earlier layout)',
+                )
+            )
         check_positive("LidarConfig", "max_range", self.max_range)
         check_nonnegative("LidarConfig", "noise_std", self.noise_std)
         if self.n_beams <= 0 or self.group_size <= 0 or self.n_beams % self.group_size:
@@ -97,6 +117,12 @@ class LidarConfig(Config):
     def n_sectors(self) -> int:
         """K = G / g."""
         return self.n_beams // self.group_size
+
+    @property
+    def sector_shift(self) -> int:
+        """Beams by which sector 0 starts before the heading: (g − 1) // 2 when centred (1 for
+        g = 3: beams G−1, 0, 1), 0 for the earlier heading-first layout."""
+        return (self.group_size - 1) // 2 if self.sector_layout == "centred" else 0
 
     @property
     def obs_dim(self) -> int:
@@ -130,9 +156,10 @@ def _observation_one(
 ) -> NDArray[np.float32]:
     """The observation of one scan on the simulator's ``G`` beams, ``(obs_dim,)`` float32."""
     g, b = cfg.group_size, cfg.n_nearest
-    sectors = beams[0::g]
+    shifted = np.roll(beams, cfg.sector_shift) if cfg.sector_shift else beams
+    sectors = shifted[0::g]  # sector k: beams g·k − shift … g·k − shift + g − 1 (mod G)
     for j in range(1, g):  # g strided minima beat a reshape + min(axis=1) on 72 beams
-        sectors = np.minimum(sectors, beams[j::g])
+        sectors = np.minimum(sectors, shifted[j::g])
     nearest = np.argsort(beams, kind="stable")[:b]  # ties: the lower beam index first
     wrapped = math.pi - ((math.pi - goal_bearing) % (2.0 * math.pi))  # as wrap_angles
     return np.concatenate(
@@ -321,6 +348,35 @@ def observation_from_beams(
             expect("beams", f"shape ({cfg.n_beams},)", b.shape, "resample with read_scan")
         )
     return _observation_one(b, math.atan2(g[1], g[0]), cfg)
+
+
+def mirror_observation(
+    obs: NDArray[np.floating], cfg: LidarConfig | None = None
+) -> NDArray[np.float32]:
+    """The observation of the mirror-image state (the world mirrored x → −x), ``(..., D)``:
+    sector k becomes sector (K − k) mod K, the distances stay and every angle φ becomes −φ
+    (wrapped to (−π, π]). Exact for the centred layout with an odd group size, where
+    observation(mirror(state)) = mirror_observation(observation(state)) up to the order of
+    two equally near beams."""
+    cfg = cfg or LidarConfig()
+    if cfg.sector_layout != "centred" or cfg.group_size % 2 == 0:
+        raise ConfigError(
+            expect(
+                "a mirror-true observation",
+                'sector_layout "centred" with an odd group_size',
+                (cfg.sector_layout, cfg.group_size),
+                "mirror only observations of the centred layout (the default)",
+            )
+        )
+    o = np.asarray(obs, dtype=np.float32)
+    if o.shape[-1] != cfg.obs_dim:
+        raise DataError(expect("observations", f"shape (..., {cfg.obs_dim})", o.shape, "fix it"))
+    k_count, b = cfg.n_sectors, cfg.n_nearest
+    out = o.copy()
+    out[..., :k_count] = o[..., (-np.arange(k_count)) % k_count]
+    neg = -o[..., k_count + b :]  # float32 negation is exact; (−π, π] maps onto itself …
+    out[..., k_count + b :] = np.where(neg <= -np.float32(math.pi), -neg, neg)  # … with π ↦ π
+    return out
 
 
 def observation_from_scan(

@@ -13,9 +13,9 @@ import gymnasium as gym
 __all__ = ["ENV_IDS", "register_envs"]
 
 ENV_IDS = {
-    "pioneer/ElevatorHRRL-v0": "hr-rl",
-    "pioneer/ElevatorHLRR-v0": "hl-rr",
-    "pioneer/StaticStudy-v0": "static",
+    "pioneer/ElevatorHRRL-v1": "hr-rl",
+    "pioneer/ElevatorHLRR-v1": "hl-rr",
+    "pioneer/StaticStudy-v1": "static",
 }
 
 

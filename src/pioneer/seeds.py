@@ -9,19 +9,28 @@
   rollouts (``dagger_seed``: values in [2³³ + 2³², 2³⁴)).
 
 Each seed seeds one episode (``env.reset(seed=...)``) and the policy's own generator.
+
+The evaluation harness runs a *seed set* (:data:`SEED_SETS`): ``"evaluation"`` (the default,
+every reported result) or ``"validation"`` (every choice: ``pioneer eval --seed-set
+validation``); :func:`episode_seed` maps (scenario, seed, trial) into either.
 """
 
 from __future__ import annotations
 
+import typing
 import zlib
+from typing import Literal
 
 import numpy as np
 
 __all__ = [
     "DAGGER_BASE",
+    "SEED_SETS",
     "TRAINING_BASE",
     "VALIDATION_BASE",
+    "SeedSet",
     "dagger_seed",
+    "episode_seed",
     "evaluation_seed",
     "training_seed",
     "validation_seed",
@@ -30,6 +39,8 @@ __all__ = [
 VALIDATION_BASE = 2**32  # validation seeds live in [2³², 2³³)
 TRAINING_BASE = 2**33  # training seeds live in [2³³, 2³⁴)
 DAGGER_BASE = 2**33 + 2**32  # DAgger's hashed half of the training range
+SeedSet = Literal["evaluation", "validation"]
+SEED_SETS: tuple[str, ...] = typing.get_args(SeedSet)
 
 
 def _hash32(*parts: int | str) -> int:
@@ -40,6 +51,17 @@ def _hash32(*parts: int | str) -> int:
 def evaluation_seed(scenario: str, seed: int, trial: int) -> int:
     """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario``."""
     return _hash32(scenario, seed, trial)
+
+
+def episode_seed(seed_set: str, scenario: str, seed: int, trial: int) -> int:
+    """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` for the
+    harness: an evaluation seed, or a validation seed (purpose ``"episode"``) that no
+    evaluation episode can share."""
+    if seed_set == "evaluation":
+        return evaluation_seed(scenario, seed, trial)
+    if seed_set == "validation":
+        return VALIDATION_BASE + _hash32("validation", "episode", scenario, seed, trial)
+    raise ValueError(f"seed set {seed_set!r} is not one of {SEED_SETS}")
 
 
 def validation_seed(purpose: str, scenario: str, k: int) -> int:

@@ -10,7 +10,10 @@ and the margin to the runner-up.
 A choice must be the stored one unless the stored margin is a near-tie (below ``TIE``
 relative): the float32 density evaluation's last bits depend on the BLAS kernels of the CPU
 (and on the number of feasible rows), so a different machine may legitimately break an exact
-tie the other way. Scores are compared to ``SCORE_RTOL``.
+tie the other way. Scores are compared to ``SCORE_RTOL``. The number of feasible candidates
+is compared exactly only where no candidate's predicted clearance (to people or walls) lies
+within ``CLEAR_TIE`` of 0 — the paper-world reference stores that margin (``clear_margin``);
+where one does, its feasibility may flip between CPUs and the decision is not compared.
 
 Two references: ``teacher_regression.npz`` pins the compact world (``hr-rl-compact``,
 ``hl-rr-compact``, with their shipped demos; stored under the names ``hr-rl`` and ``hl-rr`` it
@@ -29,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pioneer.control.rollout import rollout
 from pioneer.control.teacher import LookaheadTeacher
 from pioneer.reward.default import default_reward
 from pioneer.sim import get_scenario, sample_state, step
@@ -47,6 +51,7 @@ N_DECISIONS = 12  # per seed, one every STRIDE steps (0.1 s each) of a random dr
 STRIDE = 5
 TIE = 1e-5  # relative score margin below which either of the two best may win
 SCORE_RTOL = 1e-5
+CLEAR_TIE = 1e-9  # [m] a predicted clearance this near 0 may be a collision on another CPU
 
 
 def decisions(name: str, seed: int) -> dict[str, np.ndarray]:
@@ -56,9 +61,20 @@ def decisions(name: str, seed: int) -> dict[str, np.ndarray]:
     teacher = LookaheadTeacher(default_reward(name))
     rng = np.random.default_rng(seed)
     state = sample_state(scenario, rng)
-    out: dict[str, list[float]] = {"index": [], "score": [], "margin": [], "n_feasible": []}
+    out: dict[str, list[float]] = {
+        "index": [],
+        "score": [],
+        "margin": [],
+        "n_feasible": [],
+        "clear_margin": [],
+    }
+    cfg = teacher.config
     for _ in range(N_DECISIONS):
         scored = teacher.scores(world, state)
+        ro = rollout(world, state, teacher.candidates, cfg.horizon, cfg.dt, cfg.human_model)
+        out["clear_margin"].append(
+            float(np.min(np.abs(np.concatenate([ro.min_clearance, ro.min_wall_clearance]))))
+        )
         finite = np.sort(scored[np.isfinite(scored)])
         i = int(np.argmax(scored)) if finite.size else -1
         out["index"].append(i)
@@ -96,10 +112,17 @@ def test_teacher_decisions_in_the_paper_world_match_reference(paper_reference, n
 
 
 def _check(now: dict[str, np.ndarray], reference: dict[str, np.ndarray], name: str, seed: int):
-    ref = {key: reference[f"{name}/{seed}/{key}"] for key in now}
-    np.testing.assert_array_equal(now["n_feasible"], ref["n_feasible"])
-    np.testing.assert_allclose(now["score"], ref["score"], rtol=SCORE_RTOL, atol=1e-9)
-    changed = np.flatnonzero(now["index"] != ref["index"])
+    ref = {
+        key: reference[f"{name}/{seed}/{key}"] for key in now if f"{name}/{seed}/{key}" in reference
+    }
+    stable = (
+        ref["clear_margin"] >= CLEAR_TIE if "clear_margin" in ref else np.ones(N_DECISIONS, bool)
+    )
+    np.testing.assert_array_equal(now["n_feasible"][stable], ref["n_feasible"][stable])
+    np.testing.assert_allclose(
+        now["score"][stable], ref["score"][stable], rtol=SCORE_RTOL, atol=1e-9
+    )
+    changed = np.flatnonzero((now["index"] != ref["index"]) & stable)
     not_ties = changed[ref["margin"][changed] >= TIE]
     assert not_ties.size == 0, (
         f"{name} seed {seed}: the teacher chose differently in decisions {not_ties.tolist()} "

@@ -114,7 +114,7 @@ def test_positive_episodes_were_successes(static_demos):
         m = d.episode == e
         seed = int(d.seed[m][0])
         k = seed - TRAINING_BASE  # the episode index: 2 of 3 on the right
-        frames, event = record_episode(env, CorridorDriver(side=1.0 if k % 3 else -1.0), seed)
+        frames, event, _ = record_episode(env, CorridorDriver(side=1.0 if k % 3 else -1.0), seed)
         assert event == "success"
         k = int(m.sum())
         assert k <= len(frames)

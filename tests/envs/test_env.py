@@ -19,13 +19,21 @@ from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
 from pioneer.sim import GONE, get_scenario, sample_state
 from pioneer_testutils import assert_house_message
 
-IDS = ["pioneer/ElevatorHRRL-v0", "pioneer/ElevatorHLRR-v0", "pioneer/StaticStudy-v0"]
+IDS = ["pioneer/ElevatorHRRL-v1", "pioneer/ElevatorHLRR-v1", "pioneer/StaticStudy-v1"]
 
 
 def test_ids_registered_on_import():
     assert set(ENV_IDS) == set(IDS)
     for env_id in IDS:
         assert env_id in gym.registry
+
+
+@pytest.mark.filterwarnings("ignore:.*out of date:DeprecationWarning")
+@pytest.mark.parametrize("old", ["pioneer/ElevatorHRRL-v0", "pioneer/StaticStudy-v0"])
+def test_the_old_version_is_refused_naming_the_new_one(old):
+    """v1 changed the observation (sector 0 centred on the heading): v0 no longer exists."""
+    with pytest.raises(gym.error.DeprecatedEnv, match=old.replace("-v0", "-v1")):
+        gym.make(old)
 
 
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized:UserWarning")
@@ -111,7 +119,7 @@ def _rollout(env_id, seed, actions):
     return out
 
 
-@pytest.mark.parametrize("env_id", ["pioneer/ElevatorHRRL-v0", "pioneer/ElevatorHLRR-v0"])
+@pytest.mark.parametrize("env_id", ["pioneer/ElevatorHRRL-v1", "pioneer/ElevatorHLRR-v1"])
 def test_same_seed_same_trajectory(env_id):
     rng = np.random.default_rng(2024)
     space = gym.make(env_id).action_space

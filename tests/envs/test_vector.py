@@ -18,7 +18,7 @@ from pioneer.sim.world import State, step
 
 def test_make_vec_returns_the_native_vector_env() -> None:
     envs = gym.make_vec(
-        "pioneer/ElevatorHRRL-v0", num_envs=4, vectorization_mode="vector_entry_point"
+        "pioneer/ElevatorHRRL-v1", num_envs=4, vectorization_mode="vector_entry_point"
     )
     assert isinstance(envs.unwrapped, NavVectorEnv)
     assert envs.observation_space.shape == (4, 29)
@@ -29,7 +29,7 @@ def test_make_vec_returns_the_native_vector_env() -> None:
 @pytest.mark.parametrize("scenario", ["hr-rl", "static"])
 def test_native_equals_sync_step_for_step(scenario: str) -> None:
     """Same seeds, same actions → identical observations, rewards, flags, across autoresets."""
-    env_id = {"hr-rl": "pioneer/ElevatorHRRL-v0", "static": "pioneer/StaticStudy-v0"}[scenario]
+    env_id = {"hr-rl": "pioneer/ElevatorHRRL-v1", "static": "pioneer/StaticStudy-v1"}[scenario]
     n = 6
     native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
     sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync")

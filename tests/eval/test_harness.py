@@ -136,6 +136,40 @@ def test_episode_seed_is_stable_and_distinct():
     assert all(isinstance(x, int) and 0 <= x < 2**32 for x in seeds)
 
 
+def test_validation_episodes_are_other_seeds_than_evaluation_episodes():
+    from pioneer.seeds import TRAINING_BASE, VALIDATION_BASE
+
+    grid = [(sc, s, t) for sc in ("hr-rl", "hl-rr") for s in range(3) for t in range(50)]
+    val = [episode_seed(*g, seed_set="validation") for g in grid]
+    assert len(set(val)) == len(grid)
+    assert all(VALIDATION_BASE <= x < TRAINING_BASE for x in val)
+    assert val == [episode_seed(*g, seed_set="validation") for g in grid]
+
+
+def test_a_validation_run_records_its_seed_set_and_refuses_to_mix(tmp_path):
+    recs = evaluate(
+        ["static"], [GOAL], 1, 2, tmp_path, workers=1, progress=False, seed_set="validation"
+    )
+    for r in recs:
+        assert r["seed_set"] == "validation"
+        assert r["episode_seed"] == episode_seed("static", r["seed"], r["trial"], "validation")
+    with pytest.raises(ConfigError, match="another --out") as exc:
+        evaluate(["static"], [GOAL], 1, 3, tmp_path, workers=1, progress=False)
+    assert "validation episodes" in str(exc.value)
+    with pytest.raises(ConfigError, match="seed set"):
+        evaluate(["static"], [GOAL], 1, 1, tmp_path / "x", progress=False, seed_set="test")
+
+
+def test_eval_cli_takes_the_validation_seed_set(tmp_path):
+    from pioneer.cli import main
+
+    out = tmp_path / "val"
+    argv = ["eval", "--scenario", "static", "--policy", "goal", "--seeds", "1", "--trials", "2"]
+    assert main([*argv, "--seed-set", "validation", "--out", str(out), "--workers", "1"]) == 0
+    recs = read_records(out / EPISODES_FILE)
+    assert [r["seed_set"] for r in recs] == ["validation", "validation"]
+
+
 def test_every_record_can_be_replayed_alone(tmp_path):
     recs = evaluate(["static"], [GOAL], 2, 2, tmp_path, workers=1, progress=False)
     for r in recs:

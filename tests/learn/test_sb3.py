@@ -35,7 +35,7 @@ def test_the_command_runs_end_to_end_and_writes_every_output(trained):
     }
     summary = json.loads((out / "train.json").read_text())
     # SB3 collects whole rollouts: one of its default 2,048 steps
-    assert summary["env_steps"] == 2048 and summary["env_id"] == "pioneer/ElevatorHLRR-v0"
+    assert summary["env_steps"] == 2048 and summary["env_id"] == "pioneer/ElevatorHLRR-v1"
     assert summary["sb3"]["n_steps"] == 2048 and summary["sb3"]["policy"] == "MlpPolicy"
     assert "command" in summary  # the console script records its command line
     rows = list(csv.reader((out / "curve.csv").open()))
@@ -96,6 +96,6 @@ def test_refusals_are_one_line(trained, tmp_path):
 
 
 def test_scenarios_map_to_their_gymnasium_ids():
-    assert env_id_for("hr-rl") == ("pioneer/ElevatorHRRL-v0", {})
-    assert env_id_for("hl-rr") == ("pioneer/ElevatorHLRR-v0", {})
-    assert env_id_for("hr-rl-compact") == ("pioneer/ElevatorHRRL-v0", {"scenario": "hr-rl-compact"})
+    assert env_id_for("hr-rl") == ("pioneer/ElevatorHRRL-v1", {})
+    assert env_id_for("hl-rr") == ("pioneer/ElevatorHLRR-v1", {})
+    assert env_id_for("hr-rl-compact") == ("pioneer/ElevatorHRRL-v1", {"scenario": "hr-rl-compact"})

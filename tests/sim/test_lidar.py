@@ -3,6 +3,7 @@ real laser-scan adapter (SPEC 1.4)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -24,7 +25,13 @@ from pioneer.sim.lidar import (
     resample_scan,
 )
 from pioneer.sim.world import goal_bearing, observe, scan
-from pioneer_testutils import assert_house_message, concat_states, make_state, room_world
+from pioneer_testutils import (
+    assert_house_message,
+    concat_states,
+    make_state,
+    room_world,
+    sector_minima,
+)
 
 PI32 = float(np.float32(np.pi))
 CFG = LidarConfig()
@@ -288,7 +295,7 @@ def test_observation_from_ranges_hand_built():
     obs = observation_from_ranges(ranges, 0.25, CFG)
     assert obs.shape == (29,)
     assert obs.dtype == np.float32
-    np.testing.assert_array_equal(obs[:24], ranges.reshape(24, 3).min(1).astype(np.float32))
+    np.testing.assert_array_equal(obs[:24], sector_minima(ranges).astype(np.float32))
     assert obs[24] == np.float32(0.5)
     assert obs[25] == np.float32(0.7)
     assert obs[26] == np.float32(2 * math.pi * 10 / 72)
@@ -380,7 +387,7 @@ def check_observation_invariants(world, state):
     assert np.all(angles <= PI32)
     assert np.all(angles[:, 2] >= -PI32)  # float32 rounding: (−π, π] becomes [−π32, π32]
     # Sector minima.
-    np.testing.assert_array_equal(obs[:, :24], ranges.reshape(b, 24, 3).min(-1).astype(np.float32))
+    np.testing.assert_array_equal(obs[:, :24], sector_minima(ranges).astype(np.float32))
     # Two nearest raw beams, sorted.
     two = np.sort(ranges, axis=1)[:, :2].astype(np.float32)
     np.testing.assert_array_equal(obs[:, 24:26], two)
@@ -484,7 +491,9 @@ def test_scan_noise_needs_rng_and_stays_in_range():
 
 
 def _scene(seed=3):
-    cfg = get_scenario("hr-rl-compact")  # the scene these tolerances were set on
+    cfg = get_scenario("hr-rl-compact")  # the scene these tolerances were set on …
+    sim = dataclasses.replace(cfg.sim, lidar=CFG)  # … observed with the default layout
+    cfg = dataclasses.replace(cfg, sim=sim)
     world = cfg.world()
     state = sample_state(cfg, np.random.default_rng(seed))
     # Walk a little so humans spread out and the scan has structure.
@@ -662,3 +671,94 @@ def test_scan_adapter_bad_inputs(kwargs, field):
     with pytest.raises(DataError) as exc:
         observation_from_scan(**args)
     assert_house_message(str(exc.value), field)
+
+
+# --------------------------------------------------------------------------------------------
+# Mirror symmetry (the centred sector layout)
+
+
+def _mirror_state(state):
+    """The state mirrored x → −x: positions, velocities and waypoints negate x, the heading
+    θ becomes π − θ. The paper world's walls are symmetric, so the world is its own mirror."""
+
+    def flip(a):
+        a = a.copy()
+        a[..., 0] = -a[..., 0]
+        return a
+
+    robot = flip(state.robot)
+    robot[:, 2] = np.pi - state.robot[:, 2]
+    return dataclasses.replace(
+        state,
+        robot=robot,
+        goal=flip(state.goal),
+        start=flip(state.start),
+        h_pos=flip(state.h_pos),
+        h_vel=flip(state.h_vel),
+        h_waypoints=flip(state.h_waypoints),
+        h_home=flip(state.h_home),
+    )
+
+
+def _segments(walls):
+    """Wall segments as a set of unordered endpoint pairs (rounded to 1e-9 m)."""
+    return {
+        tuple(sorted(((round(x1, 9), round(y1, 9)), (round(x2, 9), round(y2, 9)))))
+        for x1, y1, x2, y2 in walls.tolist()
+    }
+
+
+@pytest.mark.parametrize("name", ["hr-rl", "hl-rr", "static"])
+def test_the_observation_of_the_mirrored_state_is_the_mirrored_observation(name):
+    """observation(mirror(state)) = mirror(observation(state)): sector k ↔ (24 − k) mod 24,
+    φ ↔ −φ, distances unchanged — up to float32 rounding, and to the order of two equally
+    near beams."""
+    from pioneer.laser import mirror_observation
+
+    cfg = get_scenario(name)
+    world = cfg.world()
+    mirrored = world.walls * np.array([-1.0, 1.0, -1.0, 1.0])
+    assert _segments(mirrored) == _segments(world.walls)  # the world is its own mirror image
+    checked = 0
+    for seed in range(6):
+        state = sample_state(cfg, np.random.default_rng(seed))
+        for k in range(12):
+            if k:
+                state = step(world, state, [0.3, 0.5 * math.sin(k + seed)])
+            mirrored = _mirror_state(state)
+            got = observe(world, mirrored)[0]
+            want = mirror_observation(observe(world, state)[0])
+            np.testing.assert_allclose(got[:26], want[:26], atol=1e-5)
+            assert got[28] == pytest.approx(float(want[28]), abs=1e-5)
+            # φ_1, φ_2: the same beams, unless a beam as near as d_i lies elsewhere (a tie
+            # broken by beam index, which the mirror reverses): then both are nearest beams.
+            beams = scan(world, mirrored)[0]
+            for i in (0, 1):
+                for phi in (got[26 + i], want[26 + i]):
+                    b = round(float(phi) / (2 * np.pi / 72)) % 72
+                    assert beams[b] == pytest.approx(float(got[24 + i]), abs=1e-5)
+            checked += 1
+    assert checked == 72
+
+
+def test_mirroring_twice_is_the_identity_and_sector_zero_stays():
+    from pioneer.laser import mirror_observation
+
+    rng = np.random.default_rng(0)
+    obs = np.concatenate(
+        [rng.uniform(0, 5, (50, 26)), rng.uniform(-np.pi, np.pi, (50, 3))], axis=1
+    ).astype(np.float32)
+    obs[0, 26] = np.float32(np.pi)
+    m = mirror_observation(obs)
+    np.testing.assert_array_equal(mirror_observation(m), obs)
+    np.testing.assert_array_equal(m[:, 0], obs[:, 0])  # the sector on the heading
+    np.testing.assert_array_equal(m[:, 12], obs[:, 12])  # and the one behind
+    np.testing.assert_array_equal(m[:, 1], obs[:, 23])
+    assert m[0, 26] == np.float32(np.pi)
+
+
+def test_mirroring_refuses_the_heading_first_layout():
+    from pioneer.laser import mirror_observation
+
+    with pytest.raises(ConfigError, match="centred"):
+        mirror_observation(np.zeros(29), LidarConfig(sector_layout="heading_first"))

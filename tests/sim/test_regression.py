@@ -10,9 +10,11 @@ flag could only flip where a clearance lies within that tolerance of 0, and
 
 Two references: ``regression.npz`` was made before the paper world existed and pins the
 compact world (``hr-rl-compact``, ``hl-rr-compact``; stored under the names ``hr-rl`` and
-``hl-rr`` it had then) and the static study, so the earlier world stays reproducible bit for
-bit; ``regression-paper.npz`` pins the paper world (``hr-rl``, ``hl-rr``). After an *intended*
-change of the paper world's dynamics, regenerate that one and say why in the commit::
+``hl-rr`` it had then), so the earlier world stays reproducible bit for bit;
+``regression-paper.npz`` pins the paper world (``hr-rl``, ``hl-rr``) and the static study,
+with the mirror-true sector layout (sector 0 centred on the heading). After an *intended*
+change of the paper world's dynamics or observation, regenerate that one and say why in the
+commit::
 
     .venv/bin/python tests/sim/test_regression.py --regenerate
 """
@@ -34,9 +36,9 @@ from pioneer_testutils import keyed_runs, load_reference, regenerate_reference
 
 REFERENCE = Path(__file__).with_name("data") / "regression.npz"
 PAPER_REFERENCE = Path(__file__).with_name("data") / "regression-paper.npz"
-SCENARIOS = ("hr-rl", "hl-rr", "static")  # the keys of the earlier reference …
-COMPACT = {"hr-rl": "hr-rl-compact", "hl-rr": "hl-rr-compact", "static": "static"}  # … today
-PAPER = ("hr-rl", "hl-rr")
+SCENARIOS = ("hr-rl", "hl-rr")  # the keys of the earlier reference …
+COMPACT = {"hr-rl": "hr-rl-compact", "hl-rr": "hl-rr-compact"}  # … their names today
+PAPER = ("hr-rl", "hl-rr", "static")
 SEEDS = (0, 1, 2)
 N_COPIES, N_STEPS = 4, 25
 CONTINUOUS = ("robot", "h_pos", "h_vel", "clearance", "wall_clearance", "path_length", "obs")

@@ -1,6 +1,6 @@
 """Stable-Baselines3 PPO on the Gymnasium environments, as a user of Gymnasium would train it.
 
-``train_sb3_ppo`` makes ``pioneer/ElevatorHRRL-v0`` (or ``…HLRR-v0``; other scenarios through the
+``train_sb3_ppo`` makes ``pioneer/ElevatorHRRL-v1`` (or ``…HLRR-v1``; other scenarios through the
 ``scenario`` keyword) with ``stable_baselines3.common.env_util.make_vec_env``, trains SB3's
 ``PPO("MlpPolicy")`` with SB3's default hyperparameters on the environment's own reward (the
 29-D LiDAR observation, absolute (v, ω) actions), and writes
@@ -45,7 +45,7 @@ SB3_FORMAT = "pioneer.sb3-ppo/1"
 # the CrowdNav++ trainer's learning-curve columns, counted in SB3 rollouts instead of updates
 CURVE_COLUMNS = ("rollout", *PPO_CURVE_COLUMNS[1:])
 WINDOW = 100  # finished episodes in the curve's running statistics
-_FALLBACK_ID = "pioneer/ElevatorHRRL-v0"  # any registered id; ``scenario=`` picks the world
+_FALLBACK_ID = "pioneer/ElevatorHRRL-v1"  # any registered id; ``scenario=`` picks the world
 
 
 def env_id_for(scenario: str) -> tuple[str, dict[str, Any]]:

@@ -8,7 +8,7 @@ from typing import Annotated
 import tyro
 
 from pioneer.cli._common import OutFile, Seed, command_line, default, metavar, optional
-from pioneer.demos.generate import generate
+from pioneer.demos.generate import Demonstrator, Selection, generate
 from pioneer.demos.teleop import TeleopSession
 from pioneer.io import to_json
 
@@ -17,7 +17,8 @@ __all__ = ["DemosGenerate", "DemosShow", "Teleop"]
 
 @dataclasses.dataclass(frozen=True)
 class DemosGenerate:
-    """Scripted demonstrations (γ = +1 and −1) of one scenario, saved as a dataset (.npz)."""
+    """Demonstrations (γ = +1 and −1) of one scenario, saved as a dataset (.npz): efficient
+    successes of a demonstrator (+1), a careless driver's collisions (−1)."""
 
     scenario: str
     """hr-rl, hl-rr or static"""
@@ -29,11 +30,25 @@ class DemosGenerate:
     """negative samples"""
     seed: Seed = default(generate, "seed")
     """seed of the first episode"""
+    demonstrator: Demonstrator = default(generate, "demonstrator")
+    """positives from the rules-only teacher or the scripted courteous driver"""
+    max_time: Annotated[float, metavar("S")] = Selection.max_time_s
+    """keep successful episodes of at most this many seconds"""
+    max_path: Annotated[float, metavar("M")] = Selection.max_path_m
+    """… and at most this path length [m]"""
+    min_clearance: Annotated[float, metavar("M")] = Selection.min_clearance_m
+    """… that never came closer to a person than this [m]"""
 
     def run(self) -> int:
         """Generate and save; print the dataset's summary (JSON)."""
         d = generate(
-            self.scenario, self.positive, self.negative, seed=self.seed, command=command_line()
+            self.scenario,
+            self.positive,
+            self.negative,
+            seed=self.seed,
+            command=command_line(),
+            demonstrator=self.demonstrator,
+            selection=Selection(self.max_time, self.max_path, self.min_clearance),
         )
         d.save(self.out)
         print(to_json({"out": self.out, **d.summary()}))

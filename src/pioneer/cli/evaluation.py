@@ -25,6 +25,7 @@ from pioneer.eval.harness import evaluate
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
 from pioneer.interrupt import kept
 from pioneer.io import to_json
+from pioneer.seeds import SeedSet
 
 if TYPE_CHECKING:
     from pioneer.control.policy import Policy
@@ -154,7 +155,9 @@ class Eval:
     policy: Annotated[tuple[str, ...], metavar("POLICY")] = ("teacher",)
     """NAME or NAME:key=value,…,label=ROW (e.g. student-mdn:checkpoint=PATH,label=mine)"""
     seeds: int = _PAPER.seeds
-    """evaluation seeds"""
+    """seeds (each of --trials episodes)"""
+    seed_set: SeedSet = default(evaluate, "seed_set")
+    """evaluation (reported results) or validation (choices and tuning) episodes"""
     trials: int = _PAPER.trials
     """episodes per seed"""
     workers: Workers = None
@@ -182,6 +185,7 @@ class Eval:
             self.workers,
             backend=self.backend,
             ray_address=self.ray_address,
+            seed_set=self.seed_set,
         )
         summary = summarize(recs)
         write_summary(self.out, summary)
@@ -230,10 +234,12 @@ class Reproduce:
     """output folder"""
     workers: Workers = None
     """processes"""
+    seed_set: SeedSet = default(reproduce, "seed_set")
+    """evaluation (the reported tables) or validation (to check a choice) episodes"""
 
     def run(self) -> int:
         """Reproduce, then print what was written."""
         with kept(lambda: f"the finished steps kept in {self.out}"):  # the harness names its own
-            summary = reproduce(self.profile, self.out, self.workers)
+            summary = reproduce(self.profile, self.out, self.workers, seed_set=self.seed_set)
         print(to_json(summary, indent=2))
         return 0

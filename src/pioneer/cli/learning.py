@@ -182,7 +182,7 @@ class TrainSb3:
     out: OutDir
     """output folder (must not hold an SB3 run)"""
     scenario: str = "hr-rl"
-    """hr-rl → pioneer/ElevatorHRRL-v0, hl-rr → pioneer/ElevatorHLRR-v0; others by name"""
+    """hr-rl → pioneer/ElevatorHRRL-v1, hl-rr → pioneer/ElevatorHLRR-v1; others by name"""
     steps: int = 1_000_000
     """total environment steps"""
     envs: int = default(train_sb3_ppo, "n_envs")

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-from typing import TYPE_CHECKING, Annotated, Any, TypeAlias
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
 from pioneer.cli._common import Flag, OutDir, OutFile, default, metavar, one_of, optional
 from pioneer.data import DEMOS_DIR
 from pioneer.errors import DataError, expect
 from pioneer.io import to_json
+from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import INDUCING, DensityConfig
 from pioneer.reward.features import FEATURE_MAPS
 
@@ -37,7 +38,9 @@ class RewardFit:
     """the dataset (.npz)"""
     out: OutFile
     """output model .npz"""
-    features: Annotated[Features | None, optional("{xy,obs_action}", "by scenario")] = None
+    features: Annotated[
+        Features | None, optional("{xy,obs_action,obs_action_sincos}", "by scenario")
+    ] = None
     """the feature map"""
     length_scale: Annotated[float | None, optional("L", "the median heuristic")] = default(
         DensityConfig, "length_scale"
@@ -55,13 +58,19 @@ class RewardFit:
     """how the subset is chosen: k-means medoids or farthest-point sampling"""
     min_gamma: Annotated[float | None, optional("G", "keep all")] = None
     """drop samples with γ below this"""
+    length_scale_factor: float = default(DensityConfig, "length_scale_factor")
+    """multiplies the median-heuristic length scale"""
+    gamma: Literal["labels", "graded"] = default(RewardRecipe, "gamma")
+    """the demos' ±1 labels, or γ graded by each episode's quality (time, margin, smoothness)"""
+    mirror_demos: Annotated[str | None, optional("FILE", "no mirror augmentation")] = None
+    """the mirror scenario's dataset (.npz), added mirrored (hl-rr's for hr-rl)"""
     allow_one_sided: Flag = False
     """fit a dataset without positives or without negatives (a warning instead of a refusal)"""
 
     def run(self) -> int:
         """Fit (selecting l if asked) and save."""
         from pioneer.reward.dataset import Dataset
-        from pioneer.reward.density import DensityReward
+        from pioneer.reward.default import fit_reward
         from pioneer.reward.features import default_feature_map, feature_map
         from pioneer.reward.select import select_length_scale
 
@@ -79,10 +88,11 @@ class RewardFit:
                 f"pioneer: warning: {what}: {got}; the reward cannot contrast them (Eq. 1)",
                 file=sys.stderr,
             )
+        mirror = Dataset.load(self.mirror_demos) if self.mirror_demos else None
         fm = feature_map(self.features or default_feature_map(d.scenarios))
-        z = fm.from_dataset(d)
         cfg = DensityConfig(
             length_scale=self.length_scale,
+            length_scale_factor=self.length_scale_factor,
             lam=self.lam,
             beta=self.beta,
             max_inducing=self.max_inducing,
@@ -90,10 +100,16 @@ class RewardFit:
         )
         records = None
         if self.select_length:
+            z = fm.from_dataset(d)
             length, records = select_length_scale(z, d.gamma, d.episode, cfg)
             cfg = cfg.replace(length_scale=length)
-        model = DensityReward(cfg).fit(z, d.gamma, list(fm.names))
-        model.info_.update({"demos": str(self.demos), "features": fm.name})
+        recipe = RewardRecipe(
+            gamma=self.gamma, mirror=mirror is not None, features=fm.name, density=cfg
+        )
+        model = fit_reward(d, recipe, mirror)
+        model.info_["demos"] = str(self.demos)
+        if mirror is not None:
+            model.info_["mirror_demos"] = str(self.mirror_demos)
         if records is not None:
             model.info_["length_selection"] = records
         model.save(self.out)

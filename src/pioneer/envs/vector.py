@@ -1,6 +1,6 @@
 """A native Gymnasium ``VectorEnv``: B copies of a scenario in one batched simulator state.
 
-``gymnasium.make_vec("pioneer/ElevatorHRRL-v0", num_envs=64)`` returns it (the ids register a
+``gymnasium.make_vec("pioneer/ElevatorHRRL-v1", num_envs=64)`` returns it (the ids register a
 ``vector_entry_point``); ``vectorization_mode="sync"`` still gives Gymnasium's
 ``SyncVectorEnv`` over :class:`~pioneer.envs.env.NavEnv` copies.
 

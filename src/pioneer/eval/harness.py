@@ -23,7 +23,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,8 @@ from pioneer.interrupt import deferred, kept
 from pioneer.io import check_regular_target, naming_path, output_dir, to_json
 from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
-from pioneer.seeds import evaluation_seed
+from pioneer.seeds import SEED_SETS
+from pioneer.seeds import episode_seed as _seed_of
 
 __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
 
@@ -127,6 +128,7 @@ class Task:
     policy: PolicySpec
     seed: int
     trial: int
+    seed_set: str = "evaluation"  # or "validation" (pioneer.seeds.SEED_SETS)
 
     @property
     def key(self) -> tuple[str, str, int, int]:
@@ -134,10 +136,10 @@ class Task:
         return (self.scenario, self.policy.row, self.seed, self.trial)
 
 
-def episode_seed(scenario: str, seed: int, trial: int) -> int:
+def episode_seed(scenario: str, seed: int, trial: int, seed_set: str = "evaluation") -> int:
     """The environment seed of trial ``trial`` of seed ``seed`` in ``scenario`` (deterministic;
-    the evaluation seeds of :mod:`pioneer.seeds`)."""
-    return evaluation_seed(scenario, seed, trial)
+    the evaluation or validation seeds of :mod:`pioneer.seeds`)."""
+    return _seed_of(seed_set, scenario, seed, trial)
 
 
 # ------------------------------------------------------------------------------ worker side
@@ -168,14 +170,16 @@ def run_task(task: Task) -> dict[str, Any]:
 
     policy = _make_policy(task.policy, task.scenario)
     t0 = time.perf_counter()
-    rec, _ = run_episode(task.scenario, policy, episode_seed(task.scenario, task.seed, task.trial))
+    env_seed = episode_seed(task.scenario, task.seed, task.trial, task.seed_set)
+    rec, _ = run_episode(task.scenario, policy, env_seed)
     wall = time.perf_counter() - t0
     d = rec.to_dict()
     d.update(
         policy=task.policy.row,
         seed=task.seed,
         trial=task.trial,
-        episode_seed=episode_seed(task.scenario, task.seed, task.trial),
+        seed_set=task.seed_set,
+        episode_seed=env_seed,
         wall_time_s=wall,
         decision_ms=1000.0 * wall / max(rec.steps, 1),
     )
@@ -253,12 +257,30 @@ def _append(fh: Any, rec: dict[str, Any]) -> None:
             raise
 
 
+def _check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: str) -> None:
+    """A folder holds episodes of one seed set (records before seed sets: evaluation)."""
+    found = sorted({str(r.get("seed_set", "evaluation")) for r in records})
+    if found and found != [seed_set]:
+        raise ConfigError(
+            expect(
+                f"{path}: records of the {seed_set} seed set",
+                f"only {seed_set} episodes in one folder",
+                f"{'/'.join(found)} episodes",
+                "evaluate into another --out",
+            )
+        )
+
+
 # ------------------------------------------------------------------------------ driver
 def _tasks(
-    scenarios: Sequence[str], policies: Sequence[PolicySpec], seeds: int, trials: int
+    scenarios: Sequence[str],
+    policies: Sequence[PolicySpec],
+    seeds: int,
+    trials: int,
+    seed_set: str = "evaluation",
 ) -> list[Task]:
     return [
-        Task(sc, pol, s, t)
+        Task(sc, pol, s, t, seed_set)
         for sc in scenarios
         for pol in policies
         for s in range(seeds)
@@ -384,12 +406,16 @@ def evaluate(
     ray_address: str | None = None,
     progress: bool = True,
     on_record: Callable[[dict[str, Any]], None] | None = None,
+    seed_set: str = "evaluation",
 ) -> list[dict[str, Any]]:
-    """Run (or resume) the evaluation; returns every record (old and new)."""
+    """Run (or resume) the evaluation on the ``seed_set`` episodes (evaluation seeds, or
+    validation seeds for choices and tuning); returns every record (old and new)."""
     if seeds < 1 or trials < 1:
         raise ConfigError(
             expect("seeds/trials", "integers >= 1", (seeds, trials), "fix the counts")
         )
+    if seed_set not in SEED_SETS:
+        raise ConfigError(expect("seed set", f"one of {SEED_SETS}", seed_set, "pick one"))
     if backend not in ("process", "ray"):
         raise ConfigError(expect("backend", "'process' or 'ray'", backend, "pick one"))
     from pioneer.control.registry import check_policy_name
@@ -405,8 +431,9 @@ def evaluate(
     _record_scenarios(out, scenarios)
     path = out / EPISODES_FILE
     records = read_records(path)
+    _check_seed_set(path, records, seed_set)
     done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
-    todo = [t for t in _tasks(scenarios, policies, seeds, trials) if t.key not in done]
+    todo = [t for t in _tasks(scenarios, policies, seeds, trials, seed_set) if t.key not in done]
     n_workers = worker_count(workers)
     stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
     total = len(done) + len(todo)

@@ -163,8 +163,11 @@ def reproduce(
     workers: int | None = None,
     progress: bool = True,
     extra_policies: Sequence[PolicySpec] = (),
+    seed_set: str = "evaluation",
 ) -> dict[str, Any]:
-    """Run the whole pipeline; returns a small summary (paths and headline numbers)."""
+    """Run the whole pipeline on the ``seed_set`` episodes (evaluation seeds for the reported
+    tables, validation seeds to check a choice); returns a small summary (paths and headline
+    numbers)."""
     if profile not in PROFILES:
         raise ConfigError(
             expect("profile", f"one of {sorted(PROFILES)}", profile, "use smoke, quick or paper")
@@ -183,7 +186,14 @@ def reproduce(
     if progress:
         _announce(profile, prof, [p.row for p in policies], out, workers)
     records = evaluate(
-        SCENARIOS, policies, prof.seeds, prof.trials, out / "eval", workers, progress=progress
+        SCENARIOS,
+        policies,
+        prof.seeds,
+        prof.trials,
+        out / "eval",
+        workers,
+        progress=progress,
+        seed_set=seed_set,
     )
     summary = summarize(records)
     md = write_summary(
@@ -212,7 +222,8 @@ def reproduce(
     elapsed = time.perf_counter() - t0
     episode_s = sum(float(r.get("wall_time_s", 0.0)) for r in records)
     write_text_atomic(
-        out / "index.md", _index(profile, prof, md, figures, (elapsed, episode_s), len(records))
+        out / "index.md",
+        _index(profile, prof, md, figures, (elapsed, episode_s), len(records), seed_set),
     )
     head = {
         k: summary[f"{k}/teacher"]["success_rate"]["mean"]
@@ -361,6 +372,7 @@ def _index(
     figs: dict[str, str],
     times: tuple[float, float],
     n: int,
+    seed_set: str = "evaluation",
 ) -> str:
     """The report; ``times`` = (this invocation's wall time, the episodes' summed run time,
     over every invocation of a resumed run) [s]."""
@@ -373,7 +385,8 @@ def _index(
         f"policy ({n} episodes), {elapsed / 60:.1f} min in the last invocation; the episodes "
         f"ran for {episode_s / 60:.1f} min in all, summed over the workers and over every "
         "invocation of a resumed run. "
-        f"Command: `pioneer reproduce --profile {profile}`.",
+        f"Episodes on {seed_set} seeds (pioneer.seeds). Command: `pioneer reproduce --profile "
+        f"{profile}{'' if seed_set == 'evaluation' else ' --seed-set ' + seed_set}`.",
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
         "95% confidence intervals: [summary.json](summary.json); tables as CSV: "

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path, load_npz
+from pioneer.laser import mirror_observation, wrap_angles
 from pioneer.sim.lidar import observation_names
 
 __all__ = ["FORMAT", "OBS_DIM", "UNITS", "Dataset"]
@@ -155,6 +156,35 @@ class Dataset:
     def filter(self, min_gamma: float = -1.0, max_gamma: float = 1.0) -> Dataset:
         """Rows with ``min_gamma <= γ <= max_gamma``."""
         return self.select((self.gamma >= min_gamma) & (self.gamma <= max_gamma))
+
+    def with_gamma(self, gamma: NDArray[np.float64]) -> Dataset:
+        """The same rows with other fidelities ``γ`` (e.g. graded by quality)."""
+        g = np.asarray(gamma, dtype=np.float64)
+        if g.shape != self.gamma.shape or not np.all(np.abs(g) <= 1.0):
+            raise DataError(
+                expect("gamma", f"shape {self.gamma.shape} in [-1, 1]", g.shape, "fix it")
+            )
+        return dataclasses.replace(self, gamma=g, meta=dict(self.meta))
+
+    def mirrored(self) -> Dataset:
+        """Every row as its mirror image (the world mirrored x → −x): the observation by
+        :func:`pioneer.laser.mirror_observation` (sector k ↔ (24 − k) mod 24, φ ↔ −φ), the
+        command (v, ω) → (v, −ω), the pose (x, y, θ) → (−x, y, π − θ); each scenario name
+        gets the suffix ``~mirrored``. HR-RL mirrored is an HL-RR demonstration."""
+        pose = self.pose.copy()
+        pose[:, 0] = -pose[:, 0]
+        pose[:, 2] = wrap_angles(np.pi - self.pose[:, 2])
+        action = self.action.copy()
+        action[:, 1] = -action[:, 1]
+        meta = {**self.meta, "mirrored": True}
+        return dataclasses.replace(
+            self,
+            obs=mirror_observation(self.obs),
+            action=action,
+            pose=pose,
+            scenarios=tuple(f"{s}~mirrored" for s in self.scenarios),
+            meta=meta,
+        )
 
     @staticmethod
     def merge(datasets: Sequence[Dataset]) -> Dataset:

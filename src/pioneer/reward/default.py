@@ -1,24 +1,92 @@
-"""The teacher's default density reward: fitted on the shipped demonstrations of a scenario."""
+"""How a density reward is made from demonstrations, and the teacher's default one.
+
+:class:`RewardRecipe` names every choice between the demonstrations and the fitted model —
+the fidelities (the ±1 labels or graded by quality), mirror augmentation, the feature map and
+the density's hyperparameters — and :func:`fit_reward` applies it. ``pioneer reward fit``
+takes the same options, so every setting compared on validation seeds (docs/reward.md) is a
+command. :func:`default_reward` fits a scenario's shipped demonstrations with
+:data:`DEFAULT_RECIPE` (the paper world's elevator scenarios) or :data:`PLAIN_RECIPE` (the
+compact world, kept as it was so its results reproduce, and the static study).
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+from typing import Literal
 
+from pioneer.config import Config
 from pioneer.data import base_scenario, shipped_demos
+from pioneer.errors import DataError, expect
 from pioneer.reward.dataset import Dataset
-from pioneer.reward.density import DensityReward
-from pioneer.reward.features import default_feature_map, feature_map
+from pioneer.reward.density import DensityConfig, DensityReward
+from pioneer.reward.features import FeatureName, default_feature_map, feature_map
+from pioneer.reward.grading import graded_gamma
 
-__all__ = ["default_features", "default_reward"]
+__all__ = [
+    "DEFAULT_RECIPE",
+    "MIRROR_OF",
+    "PLAIN_RECIPE",
+    "RewardRecipe",
+    "default_features",
+    "default_reward",
+    "fit_reward",
+]
+
+# The scenario whose demonstrations, mirrored, are this one's (the paper world is symmetric).
+MIRROR_OF = {"hr-rl": "hl-rr", "hl-rr": "hr-rl"}
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardRecipe(Config):
+    """Every choice from demonstrations to a fitted density reward."""
+
+    gamma: Literal["labels", "graded"] = "labels"  # ±1 labels, or graded (reward.grading)
+    mirror: bool = False  # add the mirror scenario's demonstrations, mirrored
+    features: FeatureName | None = None  # None: by scenario
+    density: DensityConfig = DensityConfig()
+
+
+# Chosen on validation seeds (docs/reward.md, "Settings chosen on validation seeds").
+DEFAULT_RECIPE = RewardRecipe()
+PLAIN_RECIPE = RewardRecipe()  # ±1 labels, no mirror: the compact world and the static study
+
+
+def fit_reward(
+    demos: Dataset, recipe: RewardRecipe, mirror_demos: Dataset | None = None
+) -> DensityReward:
+    """The density reward of ``demos`` (plus ``mirror_demos`` mirrored, when the recipe
+    mirrors) made as ``recipe`` says."""
+    d = demos
+    if recipe.mirror:
+        if mirror_demos is None:
+            raise DataError(
+                expect(
+                    "mirror augmentation",
+                    "the mirror scenario's demonstrations",
+                    None,
+                    "pass them (--mirror-demos), or fit without mirroring",
+                )
+            )
+        d = Dataset.merge([demos, mirror_demos.mirrored()])
+    if recipe.gamma == "graded":
+        d = d.with_gamma(graded_gamma(d))
+    fm = feature_map(recipe.features or default_feature_map(demos.scenarios))
+    model = DensityReward(recipe.density).fit(fm.from_dataset(d), d.gamma, list(fm.names))
+    model.info_.update(
+        {"features": fm.name, "gamma": recipe.gamma, "mirror": recipe.mirror, "rows": len(d)}
+    )
+    return model
 
 
 @functools.lru_cache(maxsize=8)
 def default_reward(scenario: str) -> DensityReward:
     """The density reward fitted on the shipped demos of ``scenario`` (cached per process)."""
-    d = Dataset.load(shipped_demos(scenario))
-    fm = feature_map(default_features(scenario))
-    model = DensityReward().fit(fm.from_dataset(d), d.gamma, list(fm.names))
-    model.info_.update({"demos": f"shipped:{base_scenario(scenario)}", "features": fm.name})
+    base = base_scenario(scenario)
+    recipe = DEFAULT_RECIPE if base in MIRROR_OF else PLAIN_RECIPE
+    mirror = Dataset.load(shipped_demos(MIRROR_OF[base])) if recipe.mirror else None
+    model = fit_reward(Dataset.load(shipped_demos(scenario)), recipe, mirror)
+    model.info_["demos"] = f"shipped:{base}"
     return model
 
 

@@ -2,13 +2,17 @@
 (dataset rows) and the teacher's rollouts.
 
 ``xy`` is the robot's position (the static study, paper Sec. IV-A); ``obs_action`` is the
-29-D observation (SPEC 1.4) followed by the command (v, ω), z ∈ R^31 (the elevator).
+29-D observation (paper eq. 2) followed by the command (v, ω), z ∈ R^31 (the elevator);
+``obs_action_sincos`` encodes each of the three bearings φ_1, φ_2, φ_g as (cos φ, sin φ), so
+that a bearing just past −π and one just short of π are near neighbours, z ∈ R^34.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import typing
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,16 +21,18 @@ from pioneer.errors import DataError, expect
 from pioneer.reward.dataset import Dataset
 from pioneer.sim.lidar import observation_names
 
-__all__ = ["FEATURE_MAPS", "FeatureMap", "default_feature_map", "feature_map"]
+__all__ = ["FEATURE_MAPS", "FeatureMap", "FeatureName", "default_feature_map", "feature_map"]
 
-FEATURE_MAPS = ("xy", "obs_action")
+FeatureName = Literal["xy", "obs_action", "obs_action_sincos"]
+FEATURE_MAPS: tuple[str, ...] = typing.get_args(FeatureName)
+_ANGLES = slice(26, 29)  # φ_1, φ_2, φ_g in the 29-D observation
 
 
 @dataclasses.dataclass(frozen=True)
 class FeatureMap:
     """Turns (pose, observation, action) rows into reward features z."""
 
-    name: str  # "xy" (static study) or "obs_action" (elevator, R^31)
+    name: FeatureName  # "xy" (static study), "obs_action" (elevator, R^31) or its sincos form
     names: tuple[str, ...]
 
     def from_arrays(
@@ -36,7 +42,12 @@ class FeatureMap:
         ``(N, 29)`` and actions ``(N, 2)`` (only the columns the map uses are read)."""
         if self.name == "xy":
             return np.asarray(xy, dtype=np.float64)
-        return np.concatenate([obs.astype(np.float64), action], axis=1)
+        o = obs.astype(np.float64)
+        if self.name == "obs_action_sincos":
+            phi = o[:, _ANGLES]
+            trig = np.stack([np.cos(phi), np.sin(phi)], axis=2).reshape(len(o), -1)
+            return np.concatenate([o[:, : _ANGLES.start], trig, action], axis=1)
+        return np.concatenate([o, action], axis=1)
 
     def from_rollout(
         self, robot: NDArray[np.floating], obs: NDArray[np.floating], commands: NDArray[np.floating]
@@ -56,11 +67,15 @@ class FeatureMap:
 
 
 def feature_map(name: str) -> FeatureMap:
-    """``xy`` → (x, y); ``obs_action`` → (o, u) ∈ R^31."""
+    """``xy`` → (x, y); ``obs_action`` → (o, u) ∈ R^31; ``obs_action_sincos`` → R^34."""
     if name == "xy":
         return FeatureMap("xy", ("x", "y"))
     if name == "obs_action":
         return FeatureMap("obs_action", (*observation_names(), "v", "omega"))
+    if name == "obs_action_sincos":
+        names = observation_names()
+        trig = [f"{f}_{a}" for a in names[_ANGLES] for f in ("cos", "sin")]
+        return FeatureMap("obs_action_sincos", (*names[: _ANGLES.start], *trig, "v", "omega"))
     raise DataError(expect("feature map", f"one of {list(FEATURE_MAPS)}", name, "pick one"))
 
 

@@ -9,7 +9,8 @@ Observation (paper eq. 2), exactly in this order, float32:
 
     o = [r_1 … r_K, d_1, d_2, φ_1, φ_2, φ_g]
 
-- r_k = min of the g consecutive beams of sector k (K = G / g = 24),
+- r_k = min of the g consecutive beams of sector k (K = G / g = 24), sector 0 centred on the
+  heading by default (:class:`LidarConfig` ``sector_layout``),
 - d_1 ≤ d_2 the two smallest raw beam ranges, φ_1, φ_2 their beam angles in (−π, π],
 - φ_g the goal bearing relative to the heading in (−π, π].
 """
@@ -124,7 +125,11 @@ def cast_rays(
 
 @njit(cache=True, error_model="numpy")
 def _observation_kernel(
-    ranges: NDArray[np.float64], goal_bearing: NDArray[np.float64], group: int, n_near: int
+    ranges: NDArray[np.float64],
+    goal_bearing: NDArray[np.float64],
+    group: int,
+    n_near: int,
+    shift: int,
 ) -> NDArray[np.float32]:
     p_count, g_count = ranges.shape
     k_count = g_count // group
@@ -134,10 +139,11 @@ def _observation_kernel(
     for b in range(g_count):
         beam_angle[b] = wrap_angle(2.0 * math.pi * b / g_count)
     for p in range(p_count):
-        for k in range(k_count):
-            v = ranges[p, k * group]
+        for k in range(k_count):  # sector k: beams group·k − shift + j (mod G), j < group
+            first = (k * group - shift) % g_count
+            v = ranges[p, first]
             for j in range(1, group):
-                v = min(v, ranges[p, k * group + j])
+                v = min(v, ranges[p, (first + j) % g_count])
             out[p, k] = v
         # The b smallest raw beams, nearest first; ties keep the lowest beam index first (one
         # pass of a stable insertion into the sorted top b: strict < never passes an equal).
@@ -175,5 +181,7 @@ def observation_from_ranges(
             expect("ranges", f"shape (P, {cfg.n_beams})", r.shape, "resample with resample_scan")
         )
     gb = np.broadcast_to(np.asarray(goal_bearing, dtype=np.float64), (r2.shape[0],))
-    obs = _observation_kernel(r2, np.ascontiguousarray(gb), cfg.group_size, cfg.n_nearest)
+    obs = _observation_kernel(
+        r2, np.ascontiguousarray(gb), cfg.group_size, cfg.n_nearest, cfg.sector_shift
+    )
     return obs[0] if single else obs

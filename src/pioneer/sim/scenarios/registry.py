@@ -13,6 +13,7 @@ import numpy as np
 
 from pioneer.config import Config
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
+from pioneer.laser import LidarConfig
 from pioneer.sim.humans import SocialForceConfig
 from pioneer.sim.scenarios.layouts import (
     ElevatorLayout,
@@ -29,8 +30,12 @@ from pioneer.sim.world import SimConfig
 
 
 def _compact(side: str, name: str) -> ScenarioConfig:
-    """The earlier default world (reproducible: the same states, bit for bit)."""
-    sim = SimConfig(social_force=SocialForceConfig.preset("compact"))
+    """The earlier default world (reproducible: the same states and observations, bit for
+    bit — hence the earlier heading-first sector layout)."""
+    sim = SimConfig(
+        social_force=SocialForceConfig.preset("compact"),
+        lidar=LidarConfig(sector_layout="heading_first"),
+    )
     return elevator_scenario(ElevatorLayout.compact(side), sim=sim, name=name)
 
 
