@@ -16,6 +16,7 @@ from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
 from pioneer.reward.default import default_reward
+from pioneer.reward.features import feature_map
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.humans import ARRIVED, SocialForceConfig
 from pioneer.sim.scenarios import HumanSpec, Region, ScenarioConfig, get_scenario
@@ -309,7 +310,7 @@ def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
         rows.append(z.shape[0])
         return hr_rl_reward(z)
 
-    t = LookaheadTeacher(recording)  # type: ignore[arg-type]
+    t = LookaheadTeacher(recording, features=hr_rl_reward.info_["features"])  # type: ignore[arg-type]
     mixed = 0
     for world, state in _teacher_states(12, seed=4):
         t.reset({}, np.random.default_rng(0))
@@ -321,10 +322,9 @@ def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
         assert rows == ([int(feasible.sum()) * n_l] if feasible.any() else [])
         mixed += int(0 < feasible.sum() < c)
         # reference: the density of all candidates, then the feasibility mask
-        feats = np.concatenate(
-            [ro.obs.astype(np.float64), np.broadcast_to(ro.commands[:, None], (c, n_l, 2))], 2
-        )
-        r_den = hr_rl_reward(feats.reshape(c * n_l, -1)).reshape(c, n_l).mean(axis=1)
+        fm = feature_map(hr_rl_reward.info_["features"])
+        feats = fm.from_rollout(ro.robot, ro.obs, ro.commands)
+        r_den = hr_rl_reward(feats).reshape(c, n_l).mean(axis=1)
         d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
         total, _ = combine(
             r_den,
@@ -349,7 +349,7 @@ def test_weight_overrides_replace_the_adaptive_weights(hr_rl_reward):
 
 def test_make_teacher_ablation_switches():
     full = make_teacher("hr-rl")
-    assert full.density is not None and full.features == "obs_action"
+    assert full.density is not None and full.features == "obs_action_sincos"
     assert full.config.weights == RuleWeights()
     no_den = make_teacher("hr-rl", density=False)
     assert no_den.density is None and not no_den.config.weights.use_density

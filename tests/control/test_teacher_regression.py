@@ -139,5 +139,17 @@ def test_reference_is_informative(reference):
     assert np.mean(margin >= TIE) > 0.9
 
 
+def test_the_paper_reference_is_informative_and_stable(paper_reference):
+    """Varied choices with clear margins, and no predicted clearance near 0: every stored
+    decision is compared (the closest predicted clearance is 7.7·10⁻⁵ m)."""
+    keys = [(n, s) for n in SCENARIOS for s in SEEDS]
+    index = np.concatenate([paper_reference[f"{n}/{s}/index"] for n, s in keys])
+    margin = np.concatenate([paper_reference[f"{n}/{s}/margin"] for n, s in keys])
+    clear = np.concatenate([paper_reference[f"{n}/{s}/clear_margin"] for n, s in keys])
+    assert np.unique(index).size >= 8
+    assert np.mean(margin >= TIE) > 0.9
+    assert np.all(clear >= CLEAR_TIE)
+
+
 if __name__ == "__main__":
     regenerate_reference(PAPER_REFERENCE, keyed_runs(decisions, SCENARIOS, SEEDS), sys.argv[1:])

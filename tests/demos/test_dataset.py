@@ -483,12 +483,43 @@ def test_shipped_datasets_load_with_the_documented_counts(name, n_pos, n_neg):
     assert d.scenarios == (name,)
     assert set(np.unique(d.gamma).tolist()) == {-1.0, 1.0}
     assert d.obs.dtype == np.float32 and d.obs.shape == (len(d), 29)
-    assert d.meta["source"] == "scripted"
+    assert d.meta["source"] == ("scripted" if name == "static" else "rules-only teacher")
     # every episode is one sign only and its steps are consecutive
     for e in np.unique(d.episode):
         m = d.episode == e
         assert np.unique(d.gamma[m]).size == 1
         np.testing.assert_array_equal(np.diff(d.step[m]), 1)
+
+
+def _readme_rows() -> dict[str, list[str]]:
+    """The statistics table of the shipped demos' README, by file stem."""
+    rows = {}
+    for line in (SHIPPED / "README.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0].startswith("`") and cells[0].endswith(".npz`"):
+            rows[cells[0].strip("`").removesuffix(".npz")] = cells[1:]
+    return rows
+
+
+@pytest.mark.parametrize("name", ["hr-rl", "hl-rr", "static"])
+def test_shipped_datasets_match_their_readme(name):
+    """The README's table is the files' own statistics (counts, kept positive episodes and
+    their mean time, path length and closest approach), to its printed digits."""
+    row = _readme_rows()[name]
+    d = Dataset.load(SHIPPED / f"{name}.npz")
+    ep = d.meta["positive_episodes"]
+    assert [int(row[0]), int(row[1]), int(row[2])] == [d.n_positive, d.n_negative, ep["episodes"]]
+    assert float(row[3]) == pytest.approx(ep["time_mean_s"], abs=0.005)
+    assert float(row[4]) == pytest.approx(ep["path_length_mean_m"], abs=0.005)
+    assert float(row[5]) == pytest.approx(ep["min_clearance_mean_m"], abs=0.0005)
+    # and the statistics are those of the kept episodes in the file
+    pos = d.select(d.gamma > 0)
+    assert np.unique(pos.episode).size == ep["episodes"]
+    if name != "static":
+        sel = d.meta["selection"]
+        assert (
+            ep["time_mean_s"] <= sel["max_time_s"] and ep["path_length_mean_m"] <= sel["max_path_m"]
+        )
 
 
 # --------------------------------------------------------------------------- feature maps

@@ -57,7 +57,7 @@ def test_generate_returns_exact_counts(request, fixture, scenario, n_pos, n_neg)
     assert set(np.unique(d.gamma).tolist()) == {-1.0, 1.0}
     assert d.scenarios == (scenario,)
     np.testing.assert_array_equal(d.scenario, 0)
-    assert d.meta["source"] == "scripted"
+    assert d.meta["source"] == ("scripted" if scenario == "static" else "rules-only teacher")
     assert d.meta["negative_window_s"] == NEGATIVE_WINDOW
     # positives come first, from training seeds 0, 1, …; negatives from 100000, …
     k = d.seed - TRAINING_BASE

@@ -144,7 +144,10 @@ def test_commands_leave_clipped_to_the_robot_limits(onnx_path):
         RobotConfig().v_max,
         RobotConfig().omega_max,
     ) == (V_MIN, V_MAX, OMEGA_MAX)
-    obs = Dataset.load(shipped_demos("hr-rl")).obs[::3]
+    rng = np.random.default_rng(0)  # the student's own world's demos, and odd scans
+    odd = np.concatenate([rng.uniform(0.3, 5, (300, 26)), rng.uniform(-np.pi, np.pi, (300, 3))], 1)
+    obs = np.concatenate([Dataset.load(shipped_demos("hr-rl-compact")).obs[::3], odd])
+    obs = obs.astype(np.float32)
     for cfg in (RuntimeConfig(), RuntimeConfig(v_min=0.05, v_max=0.1, omega_max=0.05)):
         rt = StudentRuntime(onnx_path, config=cfg)
         raw, _, _ = rt.decide_batch(obs)
@@ -262,10 +265,10 @@ def test_270_degree_scanner_under_each_rule():
 def test_scanner_policy_with_a_full_scanner_is_the_student(onnx_path):
     """Through the simulator's scan as a LaserScan, the runtime acts exactly as the student
     on the environment's observation (clipped as the environment clips)."""
-    rt = StudentRuntime(onnx_path)
+    env = NavEnv("hr-rl-compact")  # the student's world, with its heading-first sectors
+    rt = StudentRuntime(onnx_path, lidar=env.world.sim.lidar)
     scanner = ScannerPolicy(rt, 2 * math.pi, "full")
     student = OnnxStudentPolicy(rt)
-    env = NavEnv("hr-rl-compact")
     obs, info = env.reset(seed=3)
     scanner.reset(info, np.random.default_rng(0))
     for _ in range(30):

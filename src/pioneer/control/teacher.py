@@ -84,14 +84,16 @@ class LookaheadTeacher:
     def __init__(
         self,
         density: DensityReward | None = None,
-        features: str = "obs_action",
+        features: str | None = None,
         config: TeacherConfig | None = None,
         extra_score: ExtraScore | None = None,
         name: str = "teacher",
     ) -> None:
         self.density = density
-        self.features = features
-        self._feature_map = feature_map(features)
+        # The model knows the feature map it was fitted on; without one, the elevator's.
+        info = getattr(density, "info_", {}) if density is not None else {}
+        self.features = features or str(info.get("features", "obs_action"))
+        self._feature_map = feature_map(self.features)
         self.config = config or TeacherConfig()
         self.extra_score = extra_score
         self.name = name
