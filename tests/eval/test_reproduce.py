@@ -74,7 +74,7 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
 def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys, monkeypatch, warm):
     import pioneer.experiments.reproduce as rep
 
-    rows = ["teacher", "teacher-no-goal", "goal"]  # ≥ 10 min: whole minutes
+    rows = ["teacher", "teacher-no-goal", "teacher-no-density", "goal"]  # ≥ 10 min: whole minutes
     per_episode = sum(rep.EPISODE_S[row] for row in rows)
     assert rep.expected_seconds(rows, 1000, 2) == pytest.approx(per_episode * 500)
     assert rep.expected_seconds(rows, 1000, 1) == pytest.approx(per_episode * 1000)
@@ -82,8 +82,9 @@ def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys, monkey
     monkeypatch.setattr(rep, "jit_cache_warm", lambda: warm)
     rep._announce("paper", rep.PROFILES["paper"], rows, tmp_path, workers=2)
     line = capsys.readouterr().err.strip()
-    assert line.startswith("pioneer reproduce --profile paper: 3,000 episodes (0 done)")
-    paper = (rep.EPISODE_S["teacher"] + rep.EPISODE_S["teacher-no-goal"]) * 500 / 60
+    assert line.startswith("pioneer reproduce --profile paper: 4,000 episodes (0 done)")
+    teachers = ("teacher", "teacher-no-goal", "teacher-no-density")
+    paper = sum(rep.EPISODE_S[row] for row in teachers) * 500 / 60
     extra = rep.EPISODE_S["goal"] * 500 / 60
     fixed = (rep.OVERHEAD_S + (0.0 if warm else rep.COLD_JIT_S)) / 60
     compiling = "" if warm else ", compiling the kernels"
