@@ -21,7 +21,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.limits import V_MAX
 from pioneer.reward.dataset import Dataset
+from pioneer.sim.robot import RobotConfig
 
 __all__ = ["MARGIN_REF_M", "MIN_ABS_GAMMA", "SMOOTH_REF", "TIME_REF_S", "graded_gamma"]
 
@@ -29,8 +31,6 @@ TIME_REF_S = 12.0  # [s] the paper's teacher reaches its goal in 12.2–12.9 s (
 MARGIN_REF_M = 0.3  # [m] a margin this large (beyond the robot's radius) scores 1
 SMOOTH_REF = 0.1  # [rad/s] mean |Δω| per frame that halves the smoothness score
 MIN_ABS_GAMMA = 0.05
-ROBOT_RADIUS_M = 0.3  # r_r, the paper's robot (SPEC 1.1)
-V_MAX = 0.8  # [m/s] the robot's top speed (paper §V)
 _D1 = 24  # column of d_1, the nearest raw beam range, in the 29-D observation
 
 
@@ -42,7 +42,7 @@ def graded_gamma(d: Dataset) -> NDArray[np.float64]:
         if d.gamma[rows][0] > 0:
             t = d.time[rows]
             q_time = min(1.0, TIME_REF_S / (float(t.max() - t.min()) + _dt(t)))
-            margin = float(d.obs[rows, _D1].min()) - ROBOT_RADIUS_M
+            margin = float(d.obs[rows, _D1].min()) - RobotConfig().radius
             q_margin = float(np.clip(margin / MARGIN_REF_M, 0.0, 1.0))
             omega = d.action[rows, 1]
             jerk = float(np.abs(np.diff(omega)).mean()) if omega.size > 1 else 0.0
