@@ -88,7 +88,7 @@ def bench_teacher_decision(plan: Plan) -> Result:
     copies = state.repeat(teacher.candidates.shape[0])
     steps = ro.robot.shape[1]
     trajectory = advance(world, copies, teacher.candidates, teacher.config.dt, steps)
-    feats = feature_map("obs_action").from_rollout(ro.robot, ro.obs, ro.commands)
+    feats = feature_map(teacher.features).from_rollout(ro.robot, ro.obs, ro.commands)
     assert teacher.density is not None
     density = teacher.density
     visited = _teacher_episode_states(SEED + 31, every=10)
