@@ -178,6 +178,55 @@ def test_teacher_stops_at_once_when_every_candidate_collides(name):
     np.testing.assert_array_equal(again.command, 0.5 * again.best)
 
 
+def _rear_ended():
+    """A dead-end corridor 0.72 m wide: the robot faces the end wall 0.9 m ahead, a person
+    walks up behind it at 1 m/s toward a goal past the wall. Every candidate reaches the wall
+    or is caught, and standing still is run into."""
+    world = room_world(3.0, 0.36)
+    walls = np.array(
+        [(-3, -0.36, 0.9, -0.36), (0.9, -0.36, 0.9, 0.36), (0.9, 0.36, -3, 0.36)], dtype=float
+    )
+    world = dataclasses.replace(world, walls=walls)
+    human = {"pos": (-1.6, 0.0), "goal": (3.0, 0.0), "vel": (1.0, 0.0), "radius": 0.3,
+             "vpref": 1.0}  # fmt: skip
+    return world, make_state((0.0, 0.0, 0.0), goal=(0.6, 0.0), humans=[human])
+
+
+def _first_collision(world, state, command, cfg):
+    """Brute force: roll one command alone; its 1-based first collision step (L + 1: none)."""
+    n_steps = math.floor(cfg.horizon / cfg.dt + 1e-9)
+    s = state
+    for k in range(1, n_steps + 1):
+        s = advance(world, s, np.asarray(command, dtype=float)[None], cfg.dt, 1).final
+        if s.collided[0]:
+            return k
+    return n_steps + 1
+
+
+def test_evade_drives_the_candidate_that_collides_latest_when_standing_is_run_into():
+    world, state = _rear_ended()
+    evade = LookaheadTeacher(None, config=TeacherConfig(fallback="evade"))
+    stop = LookaheadTeacher(None, config=TeacherConfig(fallback="stop"))
+    cfg = evade.config
+    assert _rollout_of(evade, world, state).collided.all()
+    standing = _first_collision(world, state, (0.0, 0.0), cfg)
+    assert standing <= 10  # the person walks into the robot if it stops
+    steps = np.array([_first_collision(world, state, u, cfg) for u in evade.candidates])
+    np.testing.assert_array_equal(_rollout_of(evade, world, state).collision_step, steps)
+    assert steps.max() > standing
+    d = evade.decide(world, state)
+    assert d.index == -1 and d.n_feasible == 0
+    chosen = int(np.flatnonzero((evade.candidates == d.command).all(axis=1))[0])
+    assert steps[chosen] == steps.max()
+    np.testing.assert_array_equal(d.best, d.command)  # sent unsmoothed
+    np.testing.assert_array_equal(stop.decide(world, state).command, [0.0, 0.0])
+
+
+def test_fallback_must_be_stop_or_evade():
+    with pytest.raises(ConfigError, match="fallback"):
+        TeacherConfig(fallback="run")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("margin", [0.2, 0.3, 0.5])
 def test_safety_margin_bounds_the_predicted_clearance_of_the_choice(margin):
     world = room_world(3.0, 3.0)

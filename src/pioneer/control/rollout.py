@@ -58,6 +58,7 @@ class Rollout:
     min_clearance: F64  # (C,) minimum swept clearance to any human [m]
     min_wall_clearance: F64  # (C,) minimum swept clearance to walls [m]
     final: State  # the C states at the horizon (a colliding candidate: at its collision)
+    collision_step: NDArray[np.int64]  # (C,) 1-based step of the first collision (L + 1: none)
     observe: Callable[[NDArray[np.bool_] | None], NDArray[np.float32]] = dataclasses.field(
         repr=False, compare=False
     )  # which (C,) or None → their observations (C', L, 29)
@@ -103,9 +104,10 @@ def rollout(
     s = state.repeat(c)
     if human_model == "privileged":
         tr = advance(world, s, commands, dt, n_steps, stop_at_collision=True)
+        hit = tr.final.collided
         return Rollout(
-            commands, tr.poses, tr.final.collided.copy(), tr.clearance, tr.wall_clearance,
-            tr.final, functools.partial(tr.observations, world),
+            commands, tr.poses, hit.copy(), tr.clearance, tr.wall_clearance, tr.final,
+            np.where(hit, tr.live_steps, n_steps + 1), functools.partial(tr.observations, world),
         )  # fmt: skip
     # Constant velocity: freeze the social-force model and move the humans along their current
     # velocity after each step, then check the robot against the moved humans too.
@@ -116,6 +118,7 @@ def rollout(
     states = []
     clear = np.full(c, np.inf)
     wclear = np.full(c, np.inf)
+    first = np.full(c, n_steps + 1, dtype=np.int64)
     for k in range(n_steps):
         s = step(world, s, commands, dt=dt)
         if state.n_humans:
@@ -125,11 +128,12 @@ def rollout(
             np.minimum(s.clearance, gap, out=s.clearance)
             np.logical_or(s.collided, gap < 0.0, out=s.collided)
         robot[:, k] = s.robot
+        first[s.collided & (first > n_steps)] = k + 1
         states.append(s)
         np.minimum(clear, s.clearance, out=clear)
         np.minimum(wclear, s.wall_clearance, out=wclear)
     obs = np.ascontiguousarray(observe_states(world, states).transpose(1, 0, 2))  # (C, L, 29)
     return Rollout(
-        commands, robot, s.collided.copy(), clear, wclear, s,
+        commands, robot, s.collided.copy(), clear, wclear, s, first,
         lambda which: obs if which is None else obs[which],
     )  # fmt: skip

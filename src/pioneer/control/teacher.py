@@ -11,8 +11,10 @@ is smoothed: u_t = α_EMA u* + (1 − α_EMA) u_{t−1}, α_EMA = 0.5.
 
 Additions to the paper (docs/teacher.md): a candidate predicted to collide (or to come closer
 than ``safety_margin``) is infeasible; if none is feasible the teacher stops at once
-(v = ω = 0, no smoothing). An optional ``extra_score`` hook adds a scenario-specific term
-(the courteous demonstrator uses it to yield to people leaving the elevator).
+(v = ω = 0, no smoothing) — unless standing still is predicted to be run into as well
+(``fallback="evade"``, the default): then it drives the candidate whose predicted collision
+comes latest. An optional ``extra_score`` hook adds a scenario-specific term (the courteous
+demonstrator uses it to yield to people leaving the elevator).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,9 +59,16 @@ class TeacherConfig(Config):
     human_model: str = "privileged"  # or "constant_velocity"
     smoothing: float = 0.5  # α_EMA
     safety_margin: float = 0.0  # [m] predicted human clearance below this is infeasible
+    # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
+    # predicted to collide too, then drive the candidate that collides latest.
+    fallback: Literal["stop", "evade"] = "evade"
     weights: RuleWeights = RuleWeights()
 
     def __post_init__(self) -> None:
+        if self.fallback not in ("stop", "evade"):
+            raise ConfigError(
+                expect("TeacherConfig.fallback", "'stop' or 'evade'", self.fallback, "pick one")
+            )
         if not 0.0 < self.smoothing <= 1.0:
             raise ConfigError(
                 expect("TeacherConfig.smoothing", "in (0, 1]", self.smoothing, "use 0.5")
@@ -125,8 +134,8 @@ class LookaheadTeacher:
             self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
         sc = self._score(world, state)
         if sc.n_feasible == 0:
-            self._prev = np.zeros(2)
-            return Decision(self._prev.copy(), np.zeros(2), -1, 0, {}, {})
+            self._prev = self._fallback(world, state, sc)
+            return Decision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
         i = int(np.argmax(sc.scored))
         best = self.candidates[i]
         cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
@@ -147,6 +156,24 @@ class LookaheadTeacher:
                 "obstacle": float(sc.r_obs[i]),
             },
         )
+
+    def _fallback(self, world: World, state: State, sc: _Scores) -> F64:
+        """The command when no candidate is feasible (sent unsmoothed): stop; with
+        ``fallback="evade"``, if standing still is predicted to collide too (a person walks into
+        the robot), the candidate whose predicted collision comes latest (ties: the best score
+        of the rule terms), or still the stop when none collides later than standing."""
+        cfg = self.config
+        stop = np.zeros(2)
+        if cfg.fallback == "stop":
+            return stop
+        still = rollout(world, state, stop[None], cfg.horizon, cfg.dt, cfg.human_model)
+        if not still.collided[0]:
+            return stop
+        latest = sc.collision_step.max()
+        if latest <= still.collision_step[0]:
+            return stop
+        among = np.where(sc.collision_step == latest, sc.total, -np.inf)
+        return self.candidates[int(np.argmax(among))].copy()
 
     def scores(self, world: World, state: State) -> F64:
         """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible; the
@@ -179,7 +206,10 @@ class LookaheadTeacher:
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
         scored = np.where(feasible, total + extra, -np.inf)
-        return _Scores(scored, n_feasible, terms, extra, r_den, r_goal, r_obs)
+        return _Scores(
+            scored, n_feasible, terms, extra, r_den, r_goal, r_obs, total + extra,
+            ro.collision_step,
+        )  # fmt: skip
 
 
 class _Scores(NamedTuple):
@@ -192,6 +222,8 @@ class _Scores(NamedTuple):
     r_den: F64
     r_goal: F64
     r_obs: F64
+    total: F64  # total + extra, also where infeasible
+    collision_step: NDArray[np.int64]  # predicted first collision step (L + 1: none)
 
 
 def make_teacher(
@@ -201,6 +233,7 @@ def make_teacher(
     goal: bool = True,
     obstacle: bool = True,
     human_model: str = "privileged",
+    fallback: str = TeacherConfig.fallback,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
@@ -216,6 +249,7 @@ def make_teacher(
     features = str(model.info_.get("features", default_features(scenario))) if model else "xy"
     cfg = TeacherConfig(
         human_model=human_model,
+        fallback=fallback,  # type: ignore[arg-type]  # checked by TeacherConfig
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)
