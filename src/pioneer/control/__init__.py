@@ -5,10 +5,10 @@ registry of every controller (teacher, baselines, students, plugins); :mod:`.rol
 :mod:`.teacher` the lookahead teacher of the paper (Sec. III).
 """
 
-from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy, make_policy, policy_names, register_policy
 from pioneer.control.rollout import Rollout, candidate_commands, rollout
 from pioneer.control.teacher import Decision, LookaheadTeacher, TeacherConfig
+from pioneer.envs.policy import Policy
 
 __all__ = [
     "Decision",

@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from pioneer.config import check_parameters
-from pioneer.control.policy import Policy
+from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 
 __all__ = [

@@ -88,7 +88,7 @@ class Decision:
 
 
 class LookaheadTeacher:
-    """The PioneeR teacher as a :class:`~pioneer.control.policy.Policy` (privileged)."""
+    """The PioneeR teacher as a :class:`~pioneer.envs.policy.Policy` (privileged)."""
 
     def __init__(
         self,

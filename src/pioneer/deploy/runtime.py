@@ -320,7 +320,7 @@ def _stop(reason: str, valid_share: float, coverage_rad: float, age_s: float) ->
 
 
 class OnnxStudentPolicy:
-    """A :class:`~pioneer.control.policy.Policy` acting from the 29-D observation through
+    """A :class:`~pioneer.envs.policy.Policy` acting from the 29-D observation through
     :class:`StudentRuntime`; ``uncertainty`` holds ``(aleatoric, epistemic)`` per step of the
     current episode (cleared by ``reset``).
 
