@@ -530,7 +530,7 @@ def test_the_example_scenario_file_loads_and_every_variant_samples(clean_registr
     from pioneer.data import shipped_student
 
     sc = clean_registry
-    path = Path(__file__).resolve().parents[2] / "examples" / "scenarios.json"
+    path = Path(__file__).resolve().parents[3] / "examples" / "scenarios.json"
     names = sc.load_scenario_file(path)
     assert len(names) >= 5
     for name in names:
