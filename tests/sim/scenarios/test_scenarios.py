@@ -50,7 +50,7 @@ def test_unknown_scenario_names_field_and_lists_names():
 
 
 def test_compact_elevator_geometry_matches_spec():
-    """The compact world (SPEC 1.5, the earlier default); the paper world: test_paper_world."""
+    """The compact world (the earlier default); the paper world: test_paper_world."""
     cfg = get_scenario("hr-rl-compact")
     walls = np.asarray(cfg.walls)
     assert cfg.bounds == (-2.0, 2.0, -1.3, 2.7)
