@@ -1,4 +1,5 @@
-"""Batched lookahead rollouts (SPEC 4): candidate set, horizon, exact robot motion, human models."""
+"""Batched lookahead rollouts (paper §IV-A.2): candidate set, horizon, exact robot motion,
+human models."""
 
 from __future__ import annotations
 

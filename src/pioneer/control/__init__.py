@@ -2,7 +2,7 @@
 
 :mod:`.policy` is the one ``Policy`` protocol; :mod:`.registry` the one lazy, string-based
 registry of every controller (teacher, baselines, students, plugins); :mod:`.rollout` and
-:mod:`.teacher` the lookahead teacher of the paper (Sec. III).
+:mod:`.teacher` the lookahead teacher of the paper (§IV-A.2).
 """
 
 from pioneer.control.registry import build_policy, make_policy, policy_names, register_policy

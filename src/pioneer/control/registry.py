@@ -99,7 +99,7 @@ def _builtin(
 _TEACHER = "pioneer.control.teacher:make_teacher"
 _PARTS = "pioneer.data.parts"
 _BUILTINS = (
-    _builtin("teacher", _TEACHER, "lookahead teacher (paper Sec. III)", check=f"{_PARTS}:teacher"),
+    _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", check=f"{_PARTS}:teacher"),
     _builtin(
         "teacher-no-density",
         _TEACHER,

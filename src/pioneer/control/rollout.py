@@ -1,4 +1,4 @@
-"""Batched lookahead rollouts through the pure world step (SPEC 4).
+"""Batched lookahead rollouts through the pure world step (paper §IV-A.2).
 
 Each candidate command is held for the horizon T; the world (robot and humans) is advanced
 at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states by :func:`pioneer.sim.world.advance`: the L steps

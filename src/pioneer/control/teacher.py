@@ -1,10 +1,10 @@
-"""The sampling-based lookahead teacher (paper §IV-A.2, SPEC 4).
+"""The sampling-based lookahead teacher (paper §IV-A.2).
 
 Every 0.1 s: roll 8 × 15 candidate commands 3 s ahead (Δt = 0.3 s, L = 10) through the
 batched world with privileged human motion, observe every rollout state, and score
 
-    R = α_den R_den + α_goal R_goal + α_obs R_obs                                   (eq. 11)
-    R_den = (1/L) Σ_ℓ r_den(o_ℓ, u)                                                  (eq. 12)
+    R = α_den R_den + α_goal R_goal + α_obs R_obs                                   (eq. 13)
+    R_den = (1/L) Σ_ℓ r_den(o_ℓ, u)                                                  (eq. 14)
 
 with the rule terms and adaptive weights of :mod:`pioneer.reward.rules`. The best command u*
 is smoothed: u_t = α_EMA u* + (1 − α_EMA) u_{t−1}, α_EMA = 0.5.

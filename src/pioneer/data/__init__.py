@@ -1,4 +1,5 @@
-"""Data shipped with the package: default demonstration datasets and trained students."""
+"""Data shipped with the package: default demonstration datasets, trained students and
+baselines, and the measured episode times of the reference machine."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pioneer.errors import DataError, expect
 
 __all__ = [
     "CROWDNAV_VARIANTS",
+    "EPISODE_TIMES",
     "base_scenario",
     "shipped_crowdnav_weights",
     "shipped_demos",
@@ -17,6 +19,9 @@ __all__ = [
 DEMOS_DIR = Path(__file__).parent / "demos"
 STUDENTS_DIR = Path(__file__).parent / "students"
 BASELINES_DIR = Path(__file__).parent / "baselines"
+# Seconds per episode of every policy on the reference machine, read by `pioneer reproduce`
+# for its expected time and written by benchmarks/episode_times.py (docs/performance.md).
+EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
 
 
 def base_scenario(scenario: str) -> str:

@@ -1,4 +1,4 @@
-"""Scripted demonstrators: reproducible demonstrations with no human at the keyboard (SPEC 2).
+"""Scripted demonstrators: reproducible demonstrations with no human at the keyboard.
 
 - ``CourteousDriver`` (γ = +1): waits aside until every exiting passenger is out of the door
   and has turned aside, then a privileged lookahead over the rule terms that never lets its

@@ -1,4 +1,4 @@
-"""The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (SPEC 6).
+"""The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (paper §IV-B).
 
 Imports numpy, onnxruntime and :mod:`pioneer.laser` only — never torch, numba or the
 simulator — so it runs on a robot computer with the light distribution

@@ -1,10 +1,10 @@
-"""Gymnasium environment over the pure world core (SPEC 1.3, 1.4).
+"""Gymnasium environment over the pure world core (docs/simulator.md).
 
-Observation ``Box(29,)`` float32 (SPEC 1.4); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
+Observation ``Box(29,)`` float32 (paper §III-A); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
 10 Hz. ``terminated`` on success or collision, ``truncated`` at the time limit (30 s).
 
 The environment's scalar reward is the CrowdNav++ reward (:mod:`pioneer.reward.crowdnav`,
-REFERENCES.md), the one the CrowdNav++ baseline trains on; PioneeR's own learned reward is
+Liu et al., ICRA 2023), the one the CrowdNav++ baseline trains on; PioneeR's own learned reward is
 :mod:`pioneer.reward.density`. Its per-term breakdown is in ``info["rewards"]``.
 """
 
@@ -30,7 +30,7 @@ __all__ = ["ENV_IDS", "NavEnv", "register_envs", "spaces"]
 def spaces(
     scenario: ScenarioConfig,
 ) -> tuple[gym.spaces.Space[NDArray[np.float32]], gym.spaces.Space[NDArray[np.float32]]]:
-    """Observation ``Box(29,)`` (SPEC 1.4) and action ``Box(2,)`` (v, ω) of one copy."""
+    """Observation ``Box(29,)`` (paper §III-A) and action ``Box(2,)`` (v, ω) of one copy."""
     sim = scenario.sim
     lid = sim.lidar
     n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1

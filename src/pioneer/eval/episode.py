@@ -81,7 +81,7 @@ def _frame_series(
     policy: Policy, clearance: list[float], robot_radius: float
 ) -> dict[str, list[float]] | None:
     """The per-frame series of a policy that reports ``uncertainty`` (one pair per step):
-    ``clearance`` is the surface gap (SPEC 1.3), ``surface`` the distance from the robot's
+    ``clearance`` is the surface gap (docs/simulator.md), ``surface`` the distance from the robot's
     centre to the nearest human's surface (the paper's "clearance", what d₁ measures)."""
     unc = getattr(policy, "uncertainty", None)
     if unc is None or len(unc) != len(clearance):

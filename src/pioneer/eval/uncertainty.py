@@ -1,4 +1,4 @@
-"""The safe/risky uncertainty analysis (paper Table IV, SPEC 6) from evaluation records.
+"""The safe/risky uncertainty analysis (paper §V-B.2, Table IV) from evaluation records.
 
 A frame is one decision of a student in an evaluation episode; its clearance is the minimum
 human–robot clearance of the state the decision was made in (``frames`` of
@@ -53,8 +53,9 @@ def frame_arrays(
     """Concatenate the per-frame series of ``records`` (those without frames are skipped);
     ``None`` (no human in range / not reported) becomes ``inf`` for clearance, NaN otherwise.
 
-    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap of
-    SPEC 1.3) or ``surface`` (robot centre → nearest human surface, the paper's clearance)."""
+    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap,
+    docs/simulator.md) or ``surface`` (robot centre → nearest human surface, the paper's
+    clearance)."""
     if measure not in MEASURES:
         raise DataError(expect("clearance measure", f"one of {MEASURES}", measure, "pick one"))
     cols: dict[str, list[float]] = {"clearance": [], "aleatoric": [], "epistemic": []}

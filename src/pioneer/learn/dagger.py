@@ -1,4 +1,4 @@
-"""DAgger: distil the privileged teacher into a LiDAR-only student (paper §IV-B, SPEC 6).
+"""DAgger: distil the privileged teacher into a LiDAR-only student (paper §IV-B).
 
 Round 0 collects ``teacher_episodes`` episodes driven by the teacher; each of the following
 ``rounds`` collects ``episodes_per_round`` episodes driven by the latest student, and the
@@ -82,7 +82,7 @@ LABEL_PREV = ("applied", "teacher")
 
 @dataclasses.dataclass(frozen=True)
 class DaggerConfig(Config):
-    """A DAgger run (defaults = SPEC 6: 50 teacher episodes + 10 rounds × 50)."""
+    """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
     scenario: str = "hr-rl"
     student: str = "mdn"  # "mdn" | "mlp"

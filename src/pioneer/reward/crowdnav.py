@@ -1,4 +1,4 @@
-"""The CrowdNav++ reward (Liu et al., ICRA 2023; unicycle terms, REFERENCES.md): the reward
+"""The CrowdNav++ reward (Liu et al., ICRA 2023; its public code's unicycle terms): the reward
 the CrowdNav++ baseline is trained on, and the Gymnasium environments' own reward.
 
     r = +10                                  on success

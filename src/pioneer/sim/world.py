@@ -7,7 +7,7 @@ teacher's 120 candidate rollouts).
 
 Within a step of length Δt the humans are integrated in substeps of at most
 ``SocialForceConfig.max_substep`` and the robot moves along its exact arc. Collisions are
-checked on the swept motion of every substep (SPEC 1.3): the closest approach of the robot
+checked on the swept motion of every substep (docs/simulator.md): the closest approach of the robot
 and each human moving linearly over the substep, and the distance between the robot's chord
 and every wall segment, both made conservative by the chord–arc deviation v·h·|ω·h|/8.
 """
@@ -393,7 +393,7 @@ def goal_bearing(state: State) -> F64:
 def observe(
     world: World, state: State, rng: np.random.Generator | None = None
 ) -> NDArray[np.float32]:
-    """The 29-D observation of every copy (SPEC 1.4), shape ``(B, 29)`` float32."""
+    """The 29-D observation of every copy (paper §III-A, eq. 2), shape ``(B, 29)`` float32."""
     return observation_from_ranges(scan(world, state, rng), goal_bearing(state), world.sim.lidar)
 
 
