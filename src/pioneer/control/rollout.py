@@ -27,20 +27,9 @@ from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
 from pioneer.sim.world import State, World, advance, observe_states, step
 
-__all__ = ["Rollout", "candidate_commands", "rollout"]
+__all__ = ["Rollout", "rollout"]
 
 F64 = NDArray[np.float64]
-
-
-def candidate_commands(
-    v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8),
-    n_omega: int = 15,
-    omega_max: float = 0.4 * math.pi,
-) -> F64:
-    """The paper's candidate set: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2)."""
-    w = np.linspace(-omega_max, omega_max, n_omega)
-    vv, ww = np.meshgrid(np.asarray(v_values, dtype=np.float64), w, indexing="ij")
-    return np.stack([vv.ravel(), ww.ravel()], axis=1)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,7 +20,6 @@ demonstrator uses it to yield to people leaving the elevator).
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, Literal, NamedTuple
 
@@ -28,8 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.config import Config
-from pioneer.control.rollout import Rollout, candidate_commands, rollout
+from pioneer.control.rollout import Rollout, rollout
 from pioneer.errors import ConfigError, expect
+from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
@@ -53,7 +53,7 @@ class TeacherConfig(Config):
 
     v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)  # [m/s]
     n_omega: int = 15  # ω values evenly spaced in [−ω_max, ω_max]
-    omega_max: float = 0.4 * math.pi  # [rad/s]
+    omega_max: float = OMEGA_MAX  # [rad/s]
     horizon: float = 3.0  # [s] T
     dt: float = 0.3  # [s] rollout step Δt
     human_model: str = "privileged"  # or "constant_velocity"
@@ -63,6 +63,13 @@ class TeacherConfig(Config):
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Literal["stop", "evade"] = "evade"
     weights: RuleWeights = RuleWeights()
+
+    def candidates(self) -> F64:
+        """The candidate commands: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2),
+        v-major (the paper's 8 × 15 = 120)."""
+        w = np.linspace(-self.omega_max, self.omega_max, self.n_omega)
+        vv, ww = np.meshgrid(np.asarray(self.v_values, dtype=np.float64), w, indexing="ij")
+        return np.stack([vv.ravel(), ww.ravel()], axis=1)
 
     def __post_init__(self) -> None:
         if self.fallback not in ("stop", "evade"):
@@ -106,9 +113,7 @@ class LookaheadTeacher:
         self.config = config or TeacherConfig()
         self.extra_score = extra_score
         self.name = name
-        self.candidates = candidate_commands(
-            self.config.v_values, self.config.n_omega, self.config.omega_max
-        )
+        self.candidates = self.config.candidates()
         self._prev = np.zeros(2)
         self.last: Decision | None = None
 

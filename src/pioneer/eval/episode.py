@@ -16,7 +16,10 @@ from pioneer.envs.policy import Policy
 from pioneer.sim.scenarios import ScenarioConfig
 from pioneer.sim.world import State, World
 
-__all__ = ["EpisodeRecord", "Trajectory", "run_episode"]
+__all__ = ["RISKY_DISTANCE_M", "EpisodeRecord", "Trajectory", "run_episode"]
+
+# The paper's safe/risky threshold (Table IV): a frame within this distance of a person is risky.
+RISKY_DISTANCE_M = 0.8  # [m]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,7 +51,7 @@ class EpisodeRecord:
     time_s: float
     path_length_m: float
     min_clearance_m: float  # minimum over the episode (inf if no humans)
-    time_close_s: float  # time with clearance below 0.8 m
+    time_close_s: float  # time with clearance below RISKY_DISTANCE_M
     steps: int
     # What the robot hit in a collision: "human", "wall" or "human and wall" (None otherwise).
     collided_with: str | None = None
@@ -109,7 +112,7 @@ def run_episode(
     policy: Policy,
     seed: int,
     record: bool = False,
-    close_threshold: float = 0.8,
+    close_threshold: float = RISKY_DISTANCE_M,
 ) -> tuple[EpisodeRecord, Trajectory | None]:
     """Run ``policy`` for one episode seeded by ``seed``; optionally keep every state."""
     env = NavEnv(scenario)

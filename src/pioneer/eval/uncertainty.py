@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.stats import auroc
 
 __all__ = ["MEASURES", "PAPER_TABLE_IV", "frame_arrays", "safe_risky", "table_iv_markdown"]
@@ -87,7 +88,9 @@ def frame_arrays(
 
 
 def safe_risky(
-    records: Iterable[Mapping[str, Any]], threshold: float = 0.8, measure: str = "clearance"
+    records: Iterable[Mapping[str, Any]],
+    threshold: float = RISKY_DISTANCE_M,
+    measure: str = "clearance",
 ) -> dict[str, Any]:
     """Counts, mean uncertainties per class and AUROCs for the frames of ``records``; a frame
     is risky when its ``measure`` (see :func:`frame_arrays`) is ≤ ``threshold``."""

@@ -37,13 +37,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.progress import progress_bar
 from pioneer.seeds import validation_seed
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
 
-RISKY_CLEARANCE = 0.8  # [m] the paper's safe/risky threshold (Table IV)
+RISKY_CLEARANCE = RISKY_DISTANCE_M  # [m] the paper's safe/risky threshold (Table IV)
 ROBOT_AWAY = 1.0e3  # [m] where the robot stands when the humans walk alone
 # The paper's evidence as bands (paper §V-B, Tables I–IV; docs/calibration.md).
 BANDS: dict[str, tuple[float, float]] = {

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
@@ -353,11 +354,11 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         fr = frame_arrays(recs, "surface")
         if fr["clearance"].size == 0:
             continue
-        results[sc] = safe_risky(recs, 0.8, "surface")
+        results[sc] = safe_risky(recs, RISKY_DISTANCE_M, "surface")
         p = PAPER_TABLE_IV[sc]
         share = p["frames_risky"] / (p["frames_risky"] + p["frames_safe"])
         finite = fr["clearance"][np.isfinite(fr["clearance"])]
-        thr = float(np.quantile(finite, share)) if finite.size else 0.8
+        thr = float(np.quantile(finite, share)) if finite.size else RISKY_DISTANCE_M
         matched[sc] = safe_risky(recs, thr, "surface")
         risky = fr["clearance"] <= thr
         for name in ("aleatoric", "epistemic"):

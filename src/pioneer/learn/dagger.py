@@ -57,6 +57,7 @@ from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
+    KINDS,
     MDN,
     Student,
     StudentConfig,
@@ -103,8 +104,8 @@ class DaggerConfig(Config):
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.student not in ("mdn", "mlp"):
-            raise ConfigError(expect("student", "'mdn' or 'mlp'", self.student, "pick one"))
+        if self.student not in KINDS:
+            raise ConfigError(expect("student", f"one of {KINDS}", self.student, "pick one"))
         if self.action_mode not in ACTION_MODES:
             raise ConfigError(
                 expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")
