@@ -8,15 +8,15 @@ the lookahead teacher of the paper (§IV-A.2).
 
 from pioneer.control.registry import build_policy, make_policy, policy_names, register_policy
 from pioneer.control.rollout import Rollout, rollout
-from pioneer.control.teacher import Decision, LookaheadTeacher, TeacherConfig
+from pioneer.control.teacher import LookaheadTeacher, TeacherConfig, TeacherDecision
 from pioneer.envs.policy import Policy
 
 __all__ = [
-    "Decision",
     "LookaheadTeacher",
     "Policy",
     "Rollout",
     "TeacherConfig",
+    "TeacherDecision",
     "build_policy",
     "make_policy",
     "policy_names",

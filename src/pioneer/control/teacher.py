@@ -37,9 +37,9 @@ from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.world import State, World
 
 __all__ = [
-    "Decision",
     "LookaheadTeacher",
     "TeacherConfig",
+    "TeacherDecision",
     "make_teacher",
 ]
 
@@ -83,7 +83,7 @@ class TeacherConfig(Config):
 
 
 @dataclasses.dataclass(frozen=True)
-class Decision:
+class TeacherDecision:
     """One teacher decision: the command and the per-term scores behind it."""
 
     command: F64  # (2,) the smoothed command actually sent
@@ -115,7 +115,7 @@ class LookaheadTeacher:
         self.name = name
         self.candidates = self.config.candidates()
         self._prev = np.zeros(2)
-        self.last: Decision | None = None
+        self.last: TeacherDecision | None = None
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Forget the previous command."""
@@ -127,7 +127,7 @@ class LookaheadTeacher:
         self.last = self.decide(info["world"], info["state"])
         return self.last.command
 
-    def decide(self, world: World, state: State, prev: F64 | None = None) -> Decision:
+    def decide(self, world: World, state: State, prev: F64 | None = None) -> TeacherDecision:
         """Score all candidates from ``state`` (B = 1) and return the smoothed command.
 
         ``prev`` replaces the teacher's own previous command u_{t−1} in the smoothing; a
@@ -140,12 +140,12 @@ class LookaheadTeacher:
         sc = self._score(world, state)
         if sc.n_feasible == 0:
             self._prev = self._fallback(world, state, sc)
-            return Decision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
+            return TeacherDecision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
         i = int(np.argmax(sc.scored))
         best = self.candidates[i]
         cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
         self._prev = cmd
-        return Decision(
+        return TeacherDecision(
             command=cmd.copy(),
             best=best.copy(),
             index=i,
