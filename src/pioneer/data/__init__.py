@@ -25,12 +25,12 @@ EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
 
 
 def base_scenario(scenario: str) -> str:
-    """The scenario whose shipped demos and students serve ``scenario``: ``hr-rl-r03`` →
-    ``hr-rl``, and a registered variant → the ``base`` it names (see
-    :func:`pioneer.sim.scenarios.scenario_base`)."""
+    """The scenario whose shipped demos and students serve ``scenario``: the built-in
+    ``base`` it was registered with (``hr-rl-r03`` → ``hr-rl``; a scenario file's variant →
+    the ``base`` it names), else itself (:func:`pioneer.sim.scenarios.scenario_base`)."""
     from pioneer.sim.scenarios import scenario_base
 
-    return scenario_base(scenario).removesuffix("-r03")
+    return scenario_base(scenario)
 
 
 def shipped_demos(scenario: str) -> Path:
