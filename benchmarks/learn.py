@@ -44,7 +44,7 @@ def bench_student_decision(plan: Plan) -> Result:
     """Student decision (batch 1): scan → command through ONNX Runtime (the deploy runtime,
     resampling included), observation → command through PyTorch (uncertainty included), and
     the teacher's decision timed apart, for the teacher/student ratio. Weights do not change
-    the cost, so a freshly initialised MDN of the SPEC architecture is timed."""
+    the cost, so a freshly initialised MDN of the paper's architecture is timed."""
     import torch
 
     from pioneer.control.teacher import make_teacher

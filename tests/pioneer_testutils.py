@@ -246,7 +246,7 @@ class Stopped:
     left: list[int]
 
     def assert_clean(self, signum: int) -> None:
-        """Exit 128 + ``signum`` within the issue's 2 s, and no process left behind."""
+        """Exit 128 + ``signum`` within 2 s, and no process left behind."""
         assert self.returncode == 128 + signum
         assert self.seconds < 2.0
         assert self.left == []

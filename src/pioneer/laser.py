@@ -1,5 +1,5 @@
 """The LiDAR's beam layout, the 29-D observation of one scan and the adapter from real laser
-scans (SPEC 1.4) — numpy only.
+scans (paper §III-A) — numpy only.
 
 This module imports neither numba nor the simulator, so the robot-side runtime
 (:mod:`pioneer.deploy`) loads it alone: no JIT compiler in memory and nothing to compile on the

@@ -82,7 +82,7 @@ def test_a_plugin_that_cannot_import_is_one_clear_error(monkeypatch: pytest.Monk
         registry.build_policy("nope")
 
 
-# ------------------------------------------------------------ typed policy parameters (issue 19)
+# ----------------------------------------------------------------------- typed policy parameters
 @pytest.mark.parametrize(
     ("name", "kwargs", "needle"),
     [

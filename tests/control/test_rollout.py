@@ -1,4 +1,5 @@
-"""Batched lookahead rollouts (SPEC 4): candidate set, horizon, exact robot motion, human models."""
+"""Batched lookahead rollouts (paper §IV-A.2): candidate set, horizon, exact robot motion,
+human models."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from pioneer.control.rollout import candidate_commands, rollout
+from pioneer.control.rollout import rollout
+from pioneer.control.teacher import TeacherConfig
 from pioneer.errors import ConfigError
 from pioneer.sim.humans import ARRIVED, WALKING
 from pioneer_testutils import concat_states, make_state, open_world
@@ -38,7 +40,7 @@ def _wrapped(a):
 
 
 def test_candidate_set_is_8_speeds_by_15_turn_rates():
-    c = candidate_commands()
+    c = TeacherConfig().candidates()
     assert c.shape == (120, 2)
     assert c.dtype == np.float64
     v = np.unique(c[:, 0])
@@ -55,7 +57,7 @@ def test_candidate_set_is_8_speeds_by_15_turn_rates():
 
 
 def test_candidate_set_is_configurable():
-    c = candidate_commands((0.2, 0.4), n_omega=3, omega_max=1.0)
+    c = TeacherConfig(v_values=(0.2, 0.4), n_omega=3, omega_max=1.0).candidates()
     expected = [[0.2, -1.0], [0.2, 0.0], [0.2, 1.0], [0.4, -1.0], [0.4, 0.0], [0.4, 1.0]]
     np.testing.assert_array_equal(c, expected)
 
@@ -67,7 +69,7 @@ def test_candidate_set_is_configurable():
 def test_rollout_has_ten_states_of_every_candidate():
     world = open_world()
     state = make_state((0.0, 0.0, 0.3), goal=(5.0, 1.0))
-    cands = candidate_commands()
+    cands = TeacherConfig().candidates()
     ro = rollout(world, state, cands)
     assert ro.robot.shape == (120, 10, 3)
     assert ro.obs.shape == (120, 10, world.sim.lidar.obs_dim) == (120, 10, 29)
@@ -85,7 +87,7 @@ def test_rollout_poses_are_exact_unicycle_arcs_in_an_empty_world():
     world = open_world()
     pose = (0.7, -1.2, 2.9)  # heading near π: the wrap to (−π, π] is exercised
     state = make_state(pose, goal=(4.0, 4.0))
-    cands = candidate_commands()
+    cands = TeacherConfig().candidates()
     ro = rollout(world, state, cands)
     assert not ro.collided.any()
     assert np.all(np.isinf(ro.min_clearance))  # no humans at all
@@ -107,7 +109,7 @@ def test_rollout_observations_match_the_world_observation_of_each_state():
 
     world = open_world()
     state = make_state((0.0, 0.0, 0.0), goal=(3.0, 0.0), humans=[{"pos": (2.0, 1.5)}])
-    cands = candidate_commands()[::17]
+    cands = TeacherConfig().candidates()[::17]
     ro = rollout(world, state, cands)
     np.testing.assert_array_equal(ro.obs[:, -1], observe(world, ro.final))
     np.testing.assert_array_equal(ro.robot[:, -1], ro.final.robot)
@@ -121,7 +123,7 @@ def test_rollout_is_deterministic_and_does_not_touch_its_input():
         humans=[{"pos": (2.0, 0.4), "goal": (-3.0, 0.4), "vel": (-0.5, 0.0)}],
     )
     before = state.copy()
-    cands = candidate_commands()
+    cands = TeacherConfig().candidates()
     a = rollout(world, state, cands)
     b = rollout(world, state, cands)
     assert state == before
@@ -135,9 +137,9 @@ def test_rollout_refuses_a_batch_and_an_unknown_human_model():
     world = open_world()
     s = make_state((0.0, 0.0, 0.0))
     with pytest.raises(ConfigError, match="B = 1"):
-        rollout(world, concat_states([s, s]), candidate_commands())
+        rollout(world, concat_states([s, s]), TeacherConfig().candidates())
     with pytest.raises(ConfigError, match="human_model"):
-        rollout(world, s, candidate_commands(), human_model="oracle")
+        rollout(world, s, TeacherConfig().candidates(), human_model="oracle")
 
 
 # --------------------------------------------------------------------------------------------
@@ -156,7 +158,7 @@ def _walkers():
 def test_constant_velocity_humans_move_in_straight_lines(horizon):
     world = open_world()
     state = make_state((0.0, 0.0, 0.0), goal=(2.0, 0.0), humans=_walkers())
-    cands = candidate_commands()[::10]
+    cands = TeacherConfig().candidates()[::10]
     ro = rollout(world, state, cands, horizon=horizon, human_model="constant_velocity")
     expected = state.h_pos[0] + state.h_vel[0] * horizon
     for c in range(cands.shape[0]):
@@ -166,7 +168,7 @@ def test_constant_velocity_humans_move_in_straight_lines(horizon):
 def test_privileged_humans_follow_the_social_force_model():
     world = open_world()
     state = make_state((0.0, 0.0, 0.0), goal=(2.0, 0.0), humans=_walkers())
-    ro = rollout(world, state, candidate_commands()[:2], human_model="privileged")
+    ro = rollout(world, state, TeacherConfig().candidates()[:2], human_model="privileged")
     linear = state.h_pos[0] + state.h_vel[0] * 3.0
     # walkers accelerate toward v_pref along their goal direction, unlike the linear prediction
     assert not np.allclose(ro.final.h_pos[0, :2], linear[:2], atol=1e-3)
@@ -199,7 +201,7 @@ def test_rollout_observes_a_subset_of_candidates_with_the_same_values(human_mode
     state = make_state(
         (0.0, 0.0, 0.0), goal=(4.0, 0.0), humans=[{"pos": (1.2, 0.1), "vel": (-0.4, 0.0)}]
     )
-    cands = candidate_commands()
+    cands = TeacherConfig().candidates()
     which = np.arange(len(cands)) % 3 == 1
     assert rollout(world, state, cands, human_model=human_model).collided[which].any()
     subset = rollout(world, state, cands, human_model=human_model).observations(which)

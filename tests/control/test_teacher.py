@@ -1,5 +1,5 @@
-"""The lookahead teacher (SPEC 4): reaches goals, never picks a predicted collision, stops when
-boxed in, smooths its command, reports its per-term scores, and its ablations run."""
+"""The lookahead teacher (paper §IV-A.2): reaches goals, never picks a predicted collision,
+stops when boxed in, smooths its command, reports its per-term scores, and its ablations run."""
 
 from __future__ import annotations
 
@@ -352,7 +352,7 @@ def test_switching_a_term_off_zeroes_it(off, hr_rl_reward):
 
 def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
     """Infeasible candidates are never chosen, so their density is not computed; the choice
-    equals the one from scoring every candidate (eq. 12 for all 120)."""
+    equals the one from scoring every candidate (eq. 14 for all 120)."""
     rows: list[int] = []
 
     def recording(z):

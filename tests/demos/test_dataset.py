@@ -1,4 +1,4 @@
-"""The demonstration dataset (SPEC 2): construction, validation, merge/filter, npz round trip."""
+"""The demonstration dataset: construction, validation, merge/filter, npz round trip."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Scripted demonstration generation (SPEC 2): counts, the 1.0 s negative window, determinism."""
+"""Scripted demonstration generation: counts, the 1.0 s negative window, determinism."""
 
 from __future__ import annotations
 

@@ -296,3 +296,25 @@ def test_run_episode_without_humans_reports_no_clearance():
     assert rec.event == "success"
     assert rec.min_clearance_m == math.inf
     assert rec.to_dict()["min_clearance_m"] is None
+
+
+def test_the_environment_takes_its_reward_and_the_world_ends_the_episode():
+    """A custom step reward replaces the CrowdNav++ reward; the endings stay the world's."""
+    calls = []
+
+    def flat(world, prev, new, event):
+        calls.append(event.copy())
+        return np.full(new.batch_size, 1.0), {"alive": np.full(new.batch_size, 1.0)}
+
+    own, default = NavEnv("hr-rl", reward=flat), NavEnv("hr-rl")
+    own.reset(seed=2)
+    default.reset(seed=2)
+    while True:
+        _, r, term, trunc, info = own.step([0.8, 0.0])
+        _, _, term_d, trunc_d, info_d = default.step([0.8, 0.0])
+        assert r == 1.0 and info["rewards"] == {"alive": 1.0}
+        assert (term, trunc, info["event"]) == (term_d, trunc_d, info_d["event"])
+        assert int(calls[-1][0]) == info["event_code"]
+        if term or trunc:
+            break
+    assert info["event"] is not None

@@ -56,8 +56,37 @@ def test_event_codes_match_the_single_env_labels() -> None:
     seen: set[int] = set()
     for _ in range(400):
         _, _, term, trunc, info = envs.step(np.tile([0.8, 0.0], (3, 1)))
-        seen |= set(info["event"][term | trunc].tolist())
+        ended = term | trunc
+        seen |= set(info["event_code"][ended].tolist())
+        labels = [Event(int(c)).label for c in info["event_code"]]
+        assert info["event"].tolist() == labels
     assert seen <= {int(Event.SUCCESS), int(Event.COLLISION), int(Event.TIMEOUT)} and seen
+
+
+def test_the_vector_env_reports_the_single_envs_info_copy_by_copy() -> None:
+    """Same keys; every value of copy i equals what NavEnv seeded ``seed + i`` reports."""
+    n = 3
+    native = NavVectorEnv(num_envs=n, scenario="hr-rl")
+    singles = [NavEnv("hr-rl") for _ in range(n)]
+    _, vinfo = native.reset(seed=5)
+    sinfo = [e.reset(seed=5 + i)[1] for i, e in enumerate(singles)]
+    assert set(vinfo) == set(sinfo[0])
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        a = rng.uniform([0.0, -1.0], [0.8, 1.0], size=(n, 2)).astype(np.float32)
+        _, _, _, _, vinfo = native.step(a)
+        sinfo = [e.step(a[i])[4] for i, e in enumerate(singles)]
+        assert set(vinfo) == set(sinfo[0])
+        for i, si in enumerate(sinfo):
+            for key in ("event", "event_code", "min_clearance", "episode_min_clearance",
+                        "wall_clearance", "time", "path_length"):  # fmt: skip
+                assert vinfo[key][i] == si[key], key
+            np.testing.assert_array_equal(vinfo["robot_pose"][i], si["robot_pose"])
+            np.testing.assert_array_equal(vinfo["goal"][i], si["goal"])
+            assert {k: v[i] for k, v in vinfo["rewards"].items()} == si["rewards"]
+            assert vinfo["state"].take(i) == si["state"]
+        if any(si["event"] is not None for si in sinfo):
+            break
 
 
 def test_bad_arguments_are_refused() -> None:

@@ -1,4 +1,4 @@
-"""Episodes and the evaluation harness (SPEC 7): deterministic episodes and seeds, resumable
+"""Episodes and the evaluation harness (paper §V-B): deterministic episodes and seeds, resumable
 records (after a kill, SIGINT, SIGTERM or a torn write), loud failure on a corrupt file, and the
 same records from serial, parallel and Ray runs."""
 

@@ -13,10 +13,10 @@ import pytest
 import torch
 
 from pioneer.baselines.classic import GoalPolicy
-from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy, policy_names
 from pioneer.control.teacher import LookaheadTeacher, make_teacher
 from pioneer.envs.env import NavEnv
+from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
 from pioneer.learn import (

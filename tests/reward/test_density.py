@@ -1,4 +1,4 @@
-"""The density reward (SPEC 3, paper eqs. 6–10) against first-principles oracles."""
+"""The density reward (paper §IV-A.1, eqs. 6–10) against first-principles oracles."""
 
 from __future__ import annotations
 
@@ -185,7 +185,7 @@ def test_negatives_lower_the_reward_only_near_themselves(rng):
 
 # --------------------------------------------------------------------------- standardisation
 def _pairwise_median_length(zs: np.ndarray) -> float:
-    return float(np.median(pdist(zs)))  # SPEC 3: the median pairwise distance
+    return float(np.median(pdist(zs)))  # the default: the median pairwise distance
 
 
 def test_default_length_scale_is_the_median_pairwise_distance(rng):

@@ -1,4 +1,4 @@
-"""Kernels of the density reward (SPEC 3, paper eqs. 9–10) against direct formulas."""
+"""Kernels of the density reward (paper §IV-A.1, eqs. 9–10) against direct formulas."""
 
 from __future__ import annotations
 

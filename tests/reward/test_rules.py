@@ -1,4 +1,4 @@
-"""Rule terms and distance-adaptive weights of the teacher's score (SPEC 4, eqs. 11–16)."""
+"""Rule terms and distance-adaptive weights of the teacher's score (paper §IV-A.2, eqs. 13–18)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """LiDAR: the numba ray caster against a brute-force reference, the 29-D observation and the
-real laser-scan adapter (SPEC 1.4)."""
+real laser-scan adapter (paper §III-A)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""The paper world (SPEC 1.2, 1.5): human–robot interaction as configuration, the layout's
-start states, and the compact world kept under its own names."""
+"""The paper world (paper §V-B; docs/simulator.md): human–robot interaction as configuration,
+the layout's start states, and the compact world kept under its own names."""
 
 from __future__ import annotations
 
@@ -100,7 +100,7 @@ def test_presets():
 
 
 def test_the_paper_world_geometry():
-    """4 × 4 m lobby in front of the attached 2.5 × 2.7 m cabin, 1.8 m door (SPEC 1.5)."""
+    """4 × 4 m lobby in front of the attached 2.5 × 2.7 m cabin, 1.8 m door (paper §V-B)."""
     sc = get_scenario("hr-rl")
     assert sc.bounds == (-2.0, 2.0, -4.0, 2.7)
     walls = np.asarray(sc.walls)

@@ -1,4 +1,4 @@
-"""Classical reference controllers (SPEC 5).
+"""Classical reference controllers (docs/baselines.md).
 
 - ``goal``: drive straight at the goal, ignoring people (observation only);
 - ``dwa``: the dynamic window approach (Fox et al. 1997) on the privileged state;

@@ -28,7 +28,7 @@ from pioneer.io import to_json
 from pioneer.seeds import SeedSet
 
 if TYPE_CHECKING:
-    from pioneer.control.policy import Policy
+    from pioneer.envs.policy import Policy
     from pioneer.eval.episode import Trajectory
     from pioneer.eval.harness import PolicySpec
     from pioneer.sim.scenarios import ScenarioConfig

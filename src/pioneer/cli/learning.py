@@ -30,6 +30,7 @@ from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
+from pioneer.learn.models import KINDS
 
 if TYPE_CHECKING:
     Student: TypeAlias = str
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
     Expert: TypeAlias = str
     UnseenRule: TypeAlias = str
 else:
-    Student = one_of(("mdn", "mlp"))
+    Student = one_of(KINDS)
     ActionMode = one_of(ACTION_MODES)
     LabelPrev = one_of(LABEL_PREV)
     Expert = one_of(EXPERTS)

@@ -1,23 +1,23 @@
 """PioneeR's own controller and the contract every controller meets.
 
-:mod:`.policy` is the one ``Policy`` protocol; :mod:`.registry` the one lazy, string-based
-registry of every controller (teacher, baselines, students, plugins); :mod:`.rollout` and
-:mod:`.teacher` the lookahead teacher of the paper (Sec. III).
+The one ``Policy`` protocol lives with the environments (:mod:`pioneer.envs.policy`) and is
+re-exported here; :mod:`.registry` is the one lazy, string-based registry of every
+controller (teacher, baselines, students, plugins); :mod:`.rollout` and :mod:`.teacher` are
+the lookahead teacher of the paper (§IV-A.2).
 """
 
-from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy, make_policy, policy_names, register_policy
-from pioneer.control.rollout import Rollout, candidate_commands, rollout
-from pioneer.control.teacher import Decision, LookaheadTeacher, TeacherConfig
+from pioneer.control.rollout import Rollout, rollout
+from pioneer.control.teacher import LookaheadTeacher, TeacherConfig, TeacherDecision
+from pioneer.envs.policy import Policy
 
 __all__ = [
-    "Decision",
     "LookaheadTeacher",
     "Policy",
     "Rollout",
     "TeacherConfig",
+    "TeacherDecision",
     "build_policy",
-    "candidate_commands",
     "make_policy",
     "policy_names",
     "register_policy",

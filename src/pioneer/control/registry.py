@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from pioneer.config import check_parameters
-from pioneer.control.policy import Policy
+from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 
 __all__ = [
@@ -99,7 +99,7 @@ def _builtin(
 _TEACHER = "pioneer.control.teacher:make_teacher"
 _PARTS = "pioneer.data.parts"
 _BUILTINS = (
-    _builtin("teacher", _TEACHER, "lookahead teacher (paper Sec. III)", check=f"{_PARTS}:teacher"),
+    _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", check=f"{_PARTS}:teacher"),
     _builtin(
         "teacher-no-density",
         _TEACHER,

@@ -1,4 +1,4 @@
-"""Batched lookahead rollouts through the pure world step (SPEC 4).
+"""Batched lookahead rollouts through the pure world step (paper §IV-A.2).
 
 Each candidate command is held for the horizon T; the world (robot and humans) is advanced
 at Δt = 0.3 s for L = ⌊T / Δt⌋ = 10 states by :func:`pioneer.sim.world.advance`: the L steps
@@ -27,20 +27,9 @@ from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
 from pioneer.sim.world import State, World, advance, observe_states, step
 
-__all__ = ["Rollout", "candidate_commands", "rollout"]
+__all__ = ["Rollout", "rollout"]
 
 F64 = NDArray[np.float64]
-
-
-def candidate_commands(
-    v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8),
-    n_omega: int = 15,
-    omega_max: float = 0.4 * math.pi,
-) -> F64:
-    """The paper's candidate set: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2)."""
-    w = np.linspace(-omega_max, omega_max, n_omega)
-    vv, ww = np.meshgrid(np.asarray(v_values, dtype=np.float64), w, indexing="ij")
-    return np.stack([vv.ravel(), ww.ravel()], axis=1)
 
 
 @dataclasses.dataclass(frozen=True)

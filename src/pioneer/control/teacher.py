@@ -1,10 +1,10 @@
-"""The sampling-based lookahead teacher (paper §IV-A.2, SPEC 4).
+"""The sampling-based lookahead teacher (paper §IV-A.2).
 
 Every 0.1 s: roll 8 × 15 candidate commands 3 s ahead (Δt = 0.3 s, L = 10) through the
 batched world with privileged human motion, observe every rollout state, and score
 
-    R = α_den R_den + α_goal R_goal + α_obs R_obs                                   (eq. 11)
-    R_den = (1/L) Σ_ℓ r_den(o_ℓ, u)                                                  (eq. 12)
+    R = α_den R_den + α_goal R_goal + α_obs R_obs                                   (eq. 13)
+    R_den = (1/L) Σ_ℓ r_den(o_ℓ, u)                                                  (eq. 14)
 
 with the rule terms and adaptive weights of :mod:`pioneer.reward.rules`. The best command u*
 is smoothed: u_t = α_EMA u* + (1 − α_EMA) u_{t−1}, α_EMA = 0.5.
@@ -20,7 +20,6 @@ demonstrator uses it to yield to people leaving the elevator).
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, Literal, NamedTuple
 
@@ -28,8 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.config import Config
-from pioneer.control.rollout import Rollout, candidate_commands, rollout
+from pioneer.control.rollout import Rollout, rollout
 from pioneer.errors import ConfigError, expect
+from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
@@ -37,9 +37,9 @@ from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.world import State, World
 
 __all__ = [
-    "Decision",
     "LookaheadTeacher",
     "TeacherConfig",
+    "TeacherDecision",
     "make_teacher",
 ]
 
@@ -53,7 +53,7 @@ class TeacherConfig(Config):
 
     v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)  # [m/s]
     n_omega: int = 15  # ω values evenly spaced in [−ω_max, ω_max]
-    omega_max: float = 0.4 * math.pi  # [rad/s]
+    omega_max: float = OMEGA_MAX  # [rad/s]
     horizon: float = 3.0  # [s] T
     dt: float = 0.3  # [s] rollout step Δt
     human_model: str = "privileged"  # or "constant_velocity"
@@ -63,6 +63,13 @@ class TeacherConfig(Config):
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Literal["stop", "evade"] = "evade"
     weights: RuleWeights = RuleWeights()
+
+    def candidates(self) -> F64:
+        """The candidate commands: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2),
+        v-major (the paper's 8 × 15 = 120)."""
+        w = np.linspace(-self.omega_max, self.omega_max, self.n_omega)
+        vv, ww = np.meshgrid(np.asarray(self.v_values, dtype=np.float64), w, indexing="ij")
+        return np.stack([vv.ravel(), ww.ravel()], axis=1)
 
     def __post_init__(self) -> None:
         if self.fallback not in ("stop", "evade"):
@@ -76,7 +83,7 @@ class TeacherConfig(Config):
 
 
 @dataclasses.dataclass(frozen=True)
-class Decision:
+class TeacherDecision:
     """One teacher decision: the command and the per-term scores behind it."""
 
     command: F64  # (2,) the smoothed command actually sent
@@ -88,7 +95,7 @@ class Decision:
 
 
 class LookaheadTeacher:
-    """The PioneeR teacher as a :class:`~pioneer.control.policy.Policy` (privileged)."""
+    """The PioneeR teacher as a :class:`~pioneer.envs.policy.Policy` (privileged)."""
 
     def __init__(
         self,
@@ -106,11 +113,9 @@ class LookaheadTeacher:
         self.config = config or TeacherConfig()
         self.extra_score = extra_score
         self.name = name
-        self.candidates = candidate_commands(
-            self.config.v_values, self.config.n_omega, self.config.omega_max
-        )
+        self.candidates = self.config.candidates()
         self._prev = np.zeros(2)
-        self.last: Decision | None = None
+        self.last: TeacherDecision | None = None
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Forget the previous command."""
@@ -122,7 +127,7 @@ class LookaheadTeacher:
         self.last = self.decide(info["world"], info["state"])
         return self.last.command
 
-    def decide(self, world: World, state: State, prev: F64 | None = None) -> Decision:
+    def decide(self, world: World, state: State, prev: F64 | None = None) -> TeacherDecision:
         """Score all candidates from ``state`` (B = 1) and return the smoothed command.
 
         ``prev`` replaces the teacher's own previous command u_{t−1} in the smoothing; a
@@ -135,12 +140,12 @@ class LookaheadTeacher:
         sc = self._score(world, state)
         if sc.n_feasible == 0:
             self._prev = self._fallback(world, state, sc)
-            return Decision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
+            return TeacherDecision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
         i = int(np.argmax(sc.scored))
         best = self.candidates[i]
         cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
         self._prev = cmd
-        return Decision(
+        return TeacherDecision(
             command=cmd.copy(),
             best=best.copy(),
             index=i,

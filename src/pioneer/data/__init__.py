@@ -1,4 +1,5 @@
-"""Data shipped with the package: default demonstration datasets and trained students."""
+"""Data shipped with the package: default demonstration datasets, trained students and
+baselines, and the measured episode times of the reference machine."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pioneer.errors import DataError, expect
 
 __all__ = [
     "CROWDNAV_VARIANTS",
+    "EPISODE_TIMES",
     "base_scenario",
     "shipped_crowdnav_weights",
     "shipped_demos",
@@ -17,15 +19,18 @@ __all__ = [
 DEMOS_DIR = Path(__file__).parent / "demos"
 STUDENTS_DIR = Path(__file__).parent / "students"
 BASELINES_DIR = Path(__file__).parent / "baselines"
+# Seconds per episode of every policy on the reference machine, read by `pioneer reproduce`
+# for its expected time and written by benchmarks/episode_times.py (docs/performance.md).
+EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
 
 
 def base_scenario(scenario: str) -> str:
-    """The scenario whose shipped demos and students serve ``scenario``: ``hr-rl-r03`` →
-    ``hr-rl``, and a registered variant → the ``base`` it names (see
-    :func:`pioneer.sim.scenarios.scenario_base`)."""
+    """The scenario whose shipped demos and students serve ``scenario``: the built-in
+    ``base`` it was registered with (``hr-rl-r03`` → ``hr-rl``; a scenario file's variant →
+    the ``base`` it names), else itself (:func:`pioneer.sim.scenarios.scenario_base`)."""
     from pioneer.sim.scenarios import scenario_base
 
-    return scenario_base(scenario).removesuffix("-r03")
+    return scenario_base(scenario)
 
 
 def shipped_demos(scenario: str) -> Path:

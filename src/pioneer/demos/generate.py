@@ -29,9 +29,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from pioneer.control.policy import Policy
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
 from pioneer.envs.env import NavEnv
+from pioneer.envs.episode import Episode, Step
+from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.progress import progress_bar
 from pioneer.reward.dataset import Dataset
@@ -76,26 +77,29 @@ def record_episode(
 ) -> tuple[list[Frame], str, dict[str, float]]:
     """Run one episode; return its frames (state–action pairs), the final event and the
     episode's statistics (``time_s``, ``path_length_m``, ``min_clearance_m`` to people)."""
-    obs, info = env.reset(seed=seed)
-    policy.reset(info, np.random.default_rng(seed))
     frames: list[Frame] = []
-    event = None
-    k = 0
-    while event is None:
-        u = np.asarray(policy.act(obs, info), dtype=np.float64)
+
+    def keep(step: Step) -> None:
+        i = step.info
         frames.append(
-            {"step": k, "time": info["time"], "obs": obs, "action": u, "pose": info["robot_pose"]}
+            {
+                "step": step.index,
+                "time": i["time"],
+                "obs": step.obs,
+                "action": step.command,
+                "pose": i["robot_pose"],
+            }
         )
-        obs, _, _, _, info = env.step(u)
-        event = info["event"]
-        k += 1
+
+    episode = Episode(env, policy, seed)
+    info = episode.run(keep)
     clear = float(info["episode_min_clearance"])
     stats = {
         "time_s": float(info["time"]),
         "path_length_m": float(info["path_length"]),
         "min_clearance_m": clear if math.isfinite(clear) else math.inf,
     }
-    return frames, str(event), stats
+    return frames, str(episode.event), stats
 
 
 def negative_frames(frames: list[Frame], dt: float, window: float = NEGATIVE_WINDOW) -> list[Frame]:

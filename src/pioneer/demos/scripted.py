@@ -1,4 +1,4 @@
-"""Scripted demonstrators: reproducible demonstrations with no human at the keyboard (SPEC 2).
+"""Scripted demonstrators: reproducible demonstrations with no human at the keyboard.
 
 - ``CourteousDriver`` (γ = +1): waits aside until every exiting passenger is out of the door
   and has turned aside, then a privileged lookahead over the rule terms that never lets its
@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from pioneer.control.rollout import rollout
 from pioneer.control.teacher import LookaheadTeacher, TeacherConfig
+from pioneer.limits import OMEGA_MAX
 from pioneer.sim.world import State
 
 __all__ = ["CarelessDriver", "CorridorDriver", "CourteousDriver"]
@@ -82,7 +83,7 @@ class CourteousDriver(LookaheadTeacher):
                 return np.zeros(2)
             b = math.atan2(d[1], d[0]) - st.robot[0, 2]
             b = math.atan2(math.sin(b), math.cos(b))
-            w = float(np.clip(1.5 * b, -0.4 * math.pi, 0.4 * math.pi))
+            w = float(np.clip(1.5 * b, -OMEGA_MAX, OMEGA_MAX))
             return np.array([self.wait_speed * max(0.0, math.cos(b)) ** 2, w])
         return super().act(obs, info)
 
@@ -124,7 +125,7 @@ class CarelessDriver:
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
         """Turn toward the goal; drive whenever roughly facing it."""
         b = float(obs[-1])
-        w = float(np.clip(self.k_omega * b, -0.4 * math.pi, 0.4 * math.pi))
+        w = float(np.clip(self.k_omega * b, -OMEGA_MAX, OMEGA_MAX))
         return np.array([self.v * max(0.0, math.cos(b)), w])
 
 
@@ -163,5 +164,5 @@ class CorridorDriver:
         d = self._wp[0] - pose[:2]
         b = math.atan2(d[1], d[0]) - pose[2]
         b = math.atan2(math.sin(b), math.cos(b))
-        w = float(np.clip(2.0 * b, -0.4 * math.pi, 0.4 * math.pi))
+        w = float(np.clip(2.0 * b, -OMEGA_MAX, OMEGA_MAX))
         return np.array([self.v * max(0.0, math.cos(b)), w])

@@ -37,7 +37,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import types
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from pioneer.demos.generate import NEGATIVE_WINDOW, Frame, negative_frames
 from pioneer.envs.env import NavEnv
+from pioneer.envs.episode import Episode
 from pioneer.errors import ConfigError, PioneerError, expect
 from pioneer.io import atomic_path
 from pioneer.reward.dataset import Dataset
@@ -92,6 +93,8 @@ class TeleopController:
     and ``None`` otherwise; unknown key names are ignored.
     """
 
+    name = "operator"
+
     def __init__(self, robot: RobotConfig | None = None) -> None:
         rc = robot or RobotConfig()
         self.v_min, self.v_max, self.omega_max = rc.v_min, rc.v_max, rc.omega_max
@@ -114,6 +117,14 @@ class TeleopController:
         """Stop and clear the N/B marks."""
         self.v = self.omega = 0.0
         self.negative = self.span_open = False
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        """As a policy: a new episode starts (:meth:`new_episode`)."""
+        self.new_episode()
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        """As a policy: the operator's current command."""
+        return self.command
 
     def press(self, key: str) -> str | None:
         """Apply one key press (see :data:`KEYS`)."""
@@ -244,8 +255,7 @@ class TeleopSession:
         self._clock = pg.time.Clock()
         self._font = pg.font.Font(None, 22)
         self._screen: Any = None
-        self._obs: NDArray[np.float32]
-        self._info: dict[str, Any]
+        self._run: Episode
         self._episode = self._start_episode()
         self.render()
 
@@ -253,9 +263,8 @@ class TeleopSession:
     def _start_episode(self) -> _Episode:
         ep = _Episode(seed=self.seed + self.episodes_started)
         self.episodes_started += 1
-        self._obs, self._info = self.env.reset(seed=ep.seed)
-        self.controller.new_episode()
-        pose = self._info["robot_pose"]
+        self._run = Episode(self.env, self.controller, ep.seed)
+        pose = self._run.info["robot_pose"]
         ep.trail.append((float(pose[0]), float(pose[1])))
         return ep
 
@@ -267,7 +276,7 @@ class TeleopSession:
     @property
     def time(self) -> float:
         """Simulated time of the current episode [s]."""
-        return float(self._info["time"])
+        return float(self._run.info["time"])
 
     def _finish_episode(self, event: str) -> None:
         """Label and save the current episode (if it has frames); the caller starts the next."""
@@ -343,22 +352,22 @@ class TeleopSession:
         episode's end event (the next episode is started) or ``None``."""
         if self.done:
             return None
-        u = self.controller.command
         ep = self._episode
+        info = self._run.info
         ep.frames.append(
             {
                 "step": len(ep.frames),
-                "time": self._info["time"],
-                "obs": self._obs,
-                "action": u,
-                "pose": self._info["robot_pose"],
+                "time": info["time"],
+                "obs": self._run.obs,
+                "action": self.controller.command,
+                "pose": info["robot_pose"],
                 "span": self.controller.span_open,
             }
         )
-        self._obs, _, _, _, self._info = self.env.step(u)
-        pose = self._info["robot_pose"]
+        self._run.step()
+        pose = self._run.info["robot_pose"]
         ep.trail.append((float(pose[0]), float(pose[1])))
-        event = self._info["event"]
+        event = self._run.event
         if event is not None:
             self._finish_episode(str(event))
             if not self.done:

@@ -9,18 +9,18 @@ from pioneer.deploy.bag import replay_bag
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
 from pioneer.deploy.runtime import (
     STOP_REASONS,
-    Decision,
     OnnxStudentPolicy,
     RuntimeConfig,
+    RuntimeDecision,
     StudentRuntime,
     make_onnx_student_policy,
 )
 
 __all__ = [
     "STOP_REASONS",
-    "Decision",
     "OnnxStudentPolicy",
     "RuntimeConfig",
+    "RuntimeDecision",
     "StudentRuntime",
     "make_onnx_student_policy",
     "mixture_action",

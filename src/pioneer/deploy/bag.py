@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from pioneer.deploy.runtime import Decision, StudentRuntime
+from pioneer.deploy.runtime import RuntimeDecision, StudentRuntime
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
 from pioneer.io import atomic_path
 from pioneer.laser import LidarConfig
@@ -183,7 +183,7 @@ def _stamp_ns(msg: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def _command_row(msg: Any, t_ns: int, d: Decision) -> tuple[str, ...]:
+def _command_row(msg: Any, t_ns: int, d: RuntimeDecision) -> tuple[str, ...]:
     stamp = msg.header.stamp
     return (
         _seconds(stamp.sec, stamp.nanosec),

@@ -1,4 +1,4 @@
-"""Mixture-density read-outs in plain numpy: decision and uncertainty (SPEC 6).
+"""Mixture-density read-outs in plain numpy: decision and uncertainty (paper §IV-B).
 
 The same formulas as :func:`pioneer.learn.models.uncertainty` (torch), for processes that
 must not import torch (the robot runtime, analysis scripts). With mixture weights
@@ -52,10 +52,11 @@ def mixture_action(
 ) -> NDArray[np.float64]:
     """The deterministic action ``(N, D)`` of a mixture.
 
-    ``"mode"`` (the default, SPEC 6): the mean of the most probable component — a command the
-    teacher actually gave in similar situations, never the average of two distinct manoeuvres
-    (passing left vs right averages to driving straight into the human). ``"mean"``: the
-    mixture mean Σ_k π_k μ_k, smoother but prone to exactly that averaging.
+    ``"mode"`` (the default, docs/student.md): the mean of the most probable component — a
+    command the teacher actually gave in similar situations, never the average of two
+    distinct manoeuvres (passing left vs right averages to driving straight into the
+    human). ``"mean"``: the mixture mean Σ_k π_k μ_k, smoother but prone to exactly that
+    averaging.
     """
     m = np.asarray(mu, dtype=np.float64)
     if mode == "mode":

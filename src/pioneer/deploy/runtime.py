@@ -1,4 +1,4 @@
-"""The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (SPEC 6).
+"""The robot-side student: laser scan → 29-D observation → ONNX Runtime → command (paper §IV-B).
 
 Imports numpy, onnxruntime and :mod:`pioneer.laser` only — never torch, numba or the
 simulator — so it runs on a robot computer with the light distribution
@@ -90,9 +90,9 @@ from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN
 __all__ = [
     "ONNX_FORMAT",
     "STOP_REASONS",
-    "Decision",
     "OnnxStudentPolicy",
     "RuntimeConfig",
+    "RuntimeDecision",
     "StudentRuntime",
     "make_onnx_student_policy",
 ]
@@ -144,7 +144,7 @@ class RuntimeConfig(Config):
 
 
 @dataclasses.dataclass(frozen=True)
-class Decision:
+class RuntimeDecision:
     """One decision: the command (clipped to the robot's limits; 0, 0 on a stop), its
     uncertainty, and the health of the scan it was made on (NaN where there was no scan or
     no age)."""
@@ -244,7 +244,7 @@ class StudentRuntime:
         epistemic = got[2] if len(got) > 2 else nan
         return action, aleatoric, epistemic
 
-    def decide(self, obs: NDArray[np.floating]) -> Decision:
+    def decide(self, obs: NDArray[np.floating]) -> RuntimeDecision:
         """The decision for one observation ``(29,)``, clipped to the command limits (a
         non-finite action is a stop with reason ``"action"``); no scan, so no scan health."""
         return self._decide(obs, math.nan, math.nan, math.nan)
@@ -259,10 +259,10 @@ class StudentRuntime:
         range_min: float = 0.0,
         *,
         age_s: float | None = None,
-    ) -> Decision:
+    ) -> RuntimeDecision:
         """Scan → command: ``ranges`` [m] with ROS ``LaserScan`` conventions (angles [rad]),
         the goal ``(x, y)`` [m] in the robot frame and the scan's age [s] at decision time
-        (now − header stamp) → a :class:`Decision`, a stop when the scan is unhealthy (module
+        (now − header stamp) → a :class:`RuntimeDecision`, a stop when the scan is unhealthy (module
         docstring). Without ``age_s`` the age is not checked (reported NaN): a robot node
         should always pass it."""
         cfg = self.runtime_config
@@ -289,13 +289,13 @@ class StudentRuntime:
 
     def _decide(
         self, obs: NDArray[np.floating], valid_share: float, coverage_rad: float, age_s: float
-    ) -> Decision:
+    ) -> RuntimeDecision:
         a, al, ep = self.decide_batch(np.reshape(obs, (1, -1)))
         v, w = float(a[0, 0]), float(a[0, 1])
         if not (math.isfinite(v) and math.isfinite(w)):
             return _stop("action", valid_share, coverage_rad, age_s)
         cfg = self.runtime_config
-        return Decision(
+        return RuntimeDecision(
             v=min(max(v, cfg.v_min), cfg.v_max),
             omega=min(max(w, -cfg.omega_max), cfg.omega_max),
             aleatoric=float(al[0]),
@@ -306,8 +306,8 @@ class StudentRuntime:
         )
 
 
-def _stop(reason: str, valid_share: float, coverage_rad: float, age_s: float) -> Decision:
-    return Decision(
+def _stop(reason: str, valid_share: float, coverage_rad: float, age_s: float) -> RuntimeDecision:
+    return RuntimeDecision(
         v=0.0,
         omega=0.0,
         aleatoric=math.nan,
@@ -320,7 +320,7 @@ def _stop(reason: str, valid_share: float, coverage_rad: float, age_s: float) ->
 
 
 class OnnxStudentPolicy:
-    """A :class:`~pioneer.control.policy.Policy` acting from the 29-D observation through
+    """A :class:`~pioneer.envs.policy.Policy` acting from the 29-D observation through
     :class:`StudentRuntime`; ``uncertainty`` holds ``(aleatoric, epistemic)`` per step of the
     current episode (cleared by ``reset``).
 

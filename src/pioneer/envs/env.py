@@ -1,10 +1,11 @@
-"""Gymnasium environment over the pure world core (SPEC 1.3, 1.4).
+"""Gymnasium environment over the pure world core (docs/simulator.md).
 
-Observation ``Box(29,)`` float32 (SPEC 1.4); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
+Observation ``Box(29,)`` float32 (paper §III-A); action ``Box([0, −0.4π], [0.8, 0.4π])`` = (v, ω);
 10 Hz. ``terminated`` on success or collision, ``truncated`` at the time limit (30 s).
 
-The environment's scalar reward is the CrowdNav++ reward (:mod:`pioneer.reward.crowdnav`,
-REFERENCES.md), the one the CrowdNav++ baseline trains on; PioneeR's own learned reward is
+The environment's scalar reward is a :class:`~pioneer.envs.reward.StepReward`; by default the
+CrowdNav++ reward (:mod:`pioneer.reward.crowdnav`,
+Liu et al., ICRA 2023), the one the CrowdNav++ baseline trains on; PioneeR's own learned reward is
 :mod:`pioneer.reward.density`. Its per-term breakdown is in ``info["rewards"]``.
 """
 
@@ -17,10 +18,11 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.envs.reward import StepReward, step_reward
 from pioneer.errors import ConfigError, expect
 from pioneer.registration import ENV_IDS, register_envs
-from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward_terms
-from pioneer.sim.events import Event
+from pioneer.reward.crowdnav import CrowdNavRewardConfig
+from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
@@ -30,7 +32,7 @@ __all__ = ["ENV_IDS", "NavEnv", "register_envs", "spaces"]
 def spaces(
     scenario: ScenarioConfig,
 ) -> tuple[gym.spaces.Space[NDArray[np.float32]], gym.spaces.Space[NDArray[np.float32]]]:
-    """Observation ``Box(29,)`` (SPEC 1.4) and action ``Box(2,)`` (v, ω) of one copy."""
+    """Observation ``Box(29,)`` (paper §III-A) and action ``Box(2,)`` (v, ω) of one copy."""
     sim = scenario.sim
     lid = sim.lidar
     n_dist, n_ang = lid.n_sectors + lid.n_nearest, lid.n_nearest + 1
@@ -50,7 +52,8 @@ def spaces(
 class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """A PioneeR scenario as a Gymnasium environment.
 
-    ``info`` carries ``event`` (``"success"``, ``"collision"``, ``"timeout"`` or ``None``),
+    ``info`` carries ``event`` (``"success"``, ``"collision"``, ``"timeout"`` or ``None``) and
+    its ``event_code`` (:class:`~pioneer.sim.events.Event`),
     ``robot_pose`` (x, y, θ), ``goal``, ``min_clearance`` (swept clearance to the nearest human
     over the last step [m]), ``episode_min_clearance``, ``time`` [s], ``path_length`` [m],
     ``rewards`` (per term), and ``state``/``world`` for privileged controllers.
@@ -62,7 +65,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self,
         scenario: str | ScenarioConfig = "hr-rl",
         render_mode: str | None = None,
-        reward: CrowdNavRewardConfig | None = None,
+        reward: StepReward | CrowdNavRewardConfig | None = None,
     ) -> None:
         self.scenario = get_scenario(scenario) if isinstance(scenario, str) else scenario
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -70,7 +73,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 expect("render_mode", f"one of {self.metadata['render_modes']}", render_mode, "")
             )
         self.render_mode = render_mode
-        self.reward_cfg = reward or CrowdNavRewardConfig()
+        self.reward = step_reward(reward)
         self.world: World = self.scenario.world()
         self.observation_space, self.action_space = spaces(self.scenario)
         self._state: State | None = None
@@ -100,7 +103,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             self._state = sample_state(self.scenario, self.np_random)
         self._ep_min_clear = float(self._state.clearance[0])
         obs = observe(self.world, self._state, self.np_random)[0]
-        return obs, self._info(None, {})
+        return obs, self._info(Event.NONE, {})
 
     def step(
         self, action: NDArray[np.floating] | list[float]
@@ -110,17 +113,19 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         new = step(self.world, prev, np.asarray(action, dtype=np.float64))
         self._state = new
         self._ep_min_clear = min(self._ep_min_clear, float(new.clearance[0]))
-        terms, total, codes = crowdnav_reward_terms(self.world, prev, new, self.reward_cfg)
+        codes = classify(prev, new, self.world.sim.time_limit)  # the world ends episodes
+        total, terms = self.reward(self.world, prev, new, codes)
         event = Event(int(codes[0]))
         obs = observe(self.world, new, self.np_random)[0]
-        info = self._info(event.label, {k: float(v[0]) for k, v in terms.items()})
+        info = self._info(event, {k: float(v[0]) for k, v in terms.items()})
         ended = event in (Event.SUCCESS, Event.COLLISION)
         return obs, float(total[0]), ended, event is Event.TIMEOUT, info
 
-    def _info(self, event: str | None, rewards: dict[str, float]) -> dict[str, Any]:
+    def _info(self, event: Event, rewards: dict[str, float]) -> dict[str, Any]:
         s = self.state
         return {
-            "event": event,
+            "event": event.label,
+            "event_code": int(event),
             "robot_pose": s.robot[0].copy(),
             "goal": s.goal[0].copy(),
             "min_clearance": float(s.clearance[0]),

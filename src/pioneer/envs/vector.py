@@ -4,17 +4,19 @@
 ``vector_entry_point``); ``vectorization_mode="sync"`` still gives Gymnasium's
 ``SyncVectorEnv`` over :class:`~pioneer.envs.env.NavEnv` copies.
 
-One ``step`` is one call of the world kernel for every copy, one reward evaluation
-(:func:`pioneer.reward.crowdnav.crowdnav_reward`) and one event classification
-(:func:`pioneer.sim.events.classify`) — the same functions the single environment and the
-CrowdNav++ trainer use. Copy i has its own generator, seeded ``seed + i`` like
+One ``step`` is one call of the world kernel for every copy, one event classification
+(:func:`pioneer.sim.events.classify`) and one evaluation of the environment's
+:class:`~pioneer.envs.reward.StepReward` (by default the CrowdNav++ reward) — the same
+functions the single environment uses. Copy i has its own generator, seeded ``seed + i`` like
 ``SyncVectorEnv`` seeds its environments, and restarts by Gymnasium's default next-step
 autoreset; so with the same seed and actions the native and the ``sync`` vector env return
 identical observations, rewards and flags (tested).
 
-``infos`` holds per-copy arrays: ``event`` (int8 codes of :class:`~pioneer.sim.events.Event`),
-``min_clearance`` [m], ``time`` [s] and ``path_length`` [m]. The batched :class:`State` is
-``env.state`` (privileged controllers and trainers read it).
+``infos`` has the keys of the single environment's ``info``, each value stacked over the
+copies: ``event`` (labels, ``None`` while going on), ``event_code`` (int8 codes of
+:class:`~pioneer.sim.events.Event`), ``robot_pose``, ``goal``, ``min_clearance``,
+``episode_min_clearance``, ``wall_clearance`` [m], ``time`` [s], ``path_length`` [m],
+``rewards`` (per term), and the batched ``state`` and the ``world``.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from pioneer.envs.env import spaces
+from pioneer.envs.reward import StepReward, step_reward
 from pioneer.errors import ConfigError, expect
-from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
-from pioneer.sim.events import Event
+from pioneer.reward.crowdnav import CrowdNavRewardConfig
+from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
@@ -48,7 +51,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         self,
         num_envs: int = 1,
         scenario: str | ScenarioConfig = "hr-rl",
-        reward: CrowdNavRewardConfig | None = None,
+        reward: StepReward | CrowdNavRewardConfig | None = None,
         render_mode: str | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
@@ -59,7 +62,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
             )
         self.scenario = get_scenario(scenario) if isinstance(scenario, str) else scenario
         self.num_envs = num_envs
-        self.reward_cfg = reward or CrowdNavRewardConfig()
+        self.reward = step_reward(reward)
         self.world: World = self.scenario.world()
         self.single_observation_space, self.single_action_space = spaces(self.scenario)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -69,6 +72,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._state: State | None = None
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._ep_min_clear = np.full(num_envs, np.inf)
 
     @property
     def state(self) -> State:
@@ -91,7 +95,9 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
                 self._rngs[i] = gym.utils.seeding.np_random(s)[0]
         self._state = State.concat([sample_state(self.scenario, rng) for rng in self._rngs])
         self._autoreset[:] = False
-        return self._observe(), self._info(self._state, np.zeros(self.num_envs, dtype=np.int8))
+        self._ep_min_clear = self._state.clearance.copy()
+        none = np.zeros(self.num_envs, dtype=np.int8)
+        return self._observe(), self._info(self._state, none, {})
 
     def _seeds(self, seed: int | list[int | None] | None) -> list[int | None]:
         if seed is None:
@@ -112,18 +118,23 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         cmd = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
         prev = self.state
         new = step(self.world, prev, cmd)
-        total, event = crowdnav_reward(self.world, prev, new, self.reward_cfg)
+        event = classify(prev, new, self.world.sim.time_limit)  # the world ends episodes
+        total, terms = self.reward(self.world, prev, new, event)
+        np.minimum(self._ep_min_clear, new.clearance, out=self._ep_min_clear)
         restart = np.flatnonzero(self._autoreset)
         for i in restart:
             new.put(int(i), sample_state(self.scenario, self._rngs[i]))
+            self._ep_min_clear[i] = new.clearance[i]
         total[restart] = 0.0
         event[restart] = Event.NONE
+        for v in terms.values():
+            v[restart] = 0.0
         self._state = new
         terminated = (event == Event.SUCCESS) | (event == Event.COLLISION)
         truncated = event == Event.TIMEOUT
         self._autoreset = terminated | truncated
         obs = self._observe()
-        return obs, total, terminated, truncated, self._info(new, event)
+        return obs, total, terminated, truncated, self._info(new, event, terms)
 
     def _observe(self) -> F32:
         if not self._noisy:
@@ -133,10 +144,20 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
             [observe(self.world, self.state.take(i), rng) for i, rng in enumerate(self._rngs)]
         )
 
-    def _info(self, state: State, event: NDArray[np.int8]) -> dict[str, Any]:
+    def _info(
+        self, state: State, event: NDArray[np.int8], rewards: dict[str, NDArray[np.float64]]
+    ) -> dict[str, Any]:
         return {
-            "event": event,
+            "event": np.array([Event(int(c)).label for c in event], dtype=object),
+            "event_code": event,
+            "robot_pose": state.robot.copy(),
+            "goal": state.goal.copy(),
             "min_clearance": state.clearance.copy(),
+            "episode_min_clearance": self._ep_min_clear.copy(),
+            "wall_clearance": state.wall_clearance.copy(),
             "time": state.t.copy(),
             "path_length": state.path_length.copy(),
+            "rewards": rewards,
+            "state": state,
+            "world": self.world,
         }

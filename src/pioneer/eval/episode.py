@@ -4,17 +4,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.control.policy import Policy
 from pioneer.envs.env import NavEnv
+from pioneer.envs.episode import Episode, Step
+from pioneer.envs.policy import Policy
 from pioneer.sim.scenarios import ScenarioConfig
 from pioneer.sim.world import State, World
 
-__all__ = ["EpisodeRecord", "Trajectory", "run_episode"]
+__all__ = ["RISKY_DISTANCE_M", "EpisodeRecord", "Trajectory", "run_episode"]
+
+# The paper's safe/risky threshold (Table IV): a frame within this distance of a person is risky.
+RISKY_DISTANCE_M = 0.8  # [m]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,7 +51,7 @@ class EpisodeRecord:
     time_s: float
     path_length_m: float
     min_clearance_m: float  # minimum over the episode (inf if no humans)
-    time_close_s: float  # time with clearance below 0.8 m
+    time_close_s: float  # time with clearance below RISKY_DISTANCE_M
     steps: int
     # What the robot hit in a collision: "human", "wall" or "human and wall" (None otherwise).
     collided_with: str | None = None
@@ -79,7 +84,7 @@ def _frame_series(
     policy: Policy, clearance: list[float], robot_radius: float
 ) -> dict[str, list[float]] | None:
     """The per-frame series of a policy that reports ``uncertainty`` (one pair per step):
-    ``clearance`` is the surface gap (SPEC 1.3), ``surface`` the distance from the robot's
+    ``clearance`` is the surface gap (docs/simulator.md), ``surface`` the distance from the robot's
     centre to the nearest human's surface (the paper's "clearance", what d₁ measures)."""
     unc = getattr(policy, "uncertainty", None)
     if unc is None or len(unc) != len(clearance):
@@ -96,7 +101,7 @@ def _frame_series(
     return out
 
 
-def _hit(info: dict[str, Any]) -> str:
+def _hit(info: Mapping[str, Any]) -> str:
     """What a collision step touched: the swept human and wall clearances of that step."""
     human, wall = info["min_clearance"] < 0.0, info["wall_clearance"] < 0.0
     return "human and wall" if human and wall else "wall" if wall else "human"
@@ -107,29 +112,29 @@ def run_episode(
     policy: Policy,
     seed: int,
     record: bool = False,
-    close_threshold: float = 0.8,
+    close_threshold: float = RISKY_DISTANCE_M,
 ) -> tuple[EpisodeRecord, Trajectory | None]:
     """Run ``policy`` for one episode seeded by ``seed``; optionally keep every state."""
     env = NavEnv(scenario)
-    obs, info = env.reset(seed=seed)
-    policy.reset(info, np.random.default_rng(seed))
+    episode = Episode(env, policy, seed)
     states = [env.state] if record else []
     dt = env.scenario.sim.dt
     close = 0.0
-    steps = 0
-    event = None
     decision_clearance: list[float] = []  # clearance of the state each command was chosen in
     wall_min = math.inf
-    while event is None:
-        decision_clearance.append(float(info["min_clearance"]))
-        obs, _, _, _, info = env.step(policy.act(obs, info))
-        steps += 1
-        wall_min = min(wall_min, float(info["wall_clearance"]))
-        if info["min_clearance"] < close_threshold:
+
+    def keep(step: Step) -> None:
+        nonlocal close, wall_min
+        decision_clearance.append(float(step.info["min_clearance"]))
+        after = step.next_info
+        wall_min = min(wall_min, float(after["wall_clearance"]))
+        if after["min_clearance"] < close_threshold:
             close += dt
         if record:
-            states.append(env.state)
-        event = info["event"]
+            states.append(after["state"])
+
+    info = episode.run(keep)
+    event = str(episode.event)
     rec = EpisodeRecord(
         scenario=env.scenario.name,
         policy=policy.name,
@@ -139,7 +144,7 @@ def run_episode(
         path_length_m=info["path_length"],
         min_clearance_m=info["episode_min_clearance"],
         time_close_s=close,
-        steps=steps,
+        steps=episode.steps,
         collided_with=_hit(info) if event == "collision" else None,
         min_wall_clearance_m=wall_min,
         frames=_frame_series(policy, decision_clearance, env.scenario.sim.robot.radius),

@@ -1,4 +1,4 @@
-"""The safe/risky uncertainty analysis (paper Table IV, SPEC 6) from evaluation records.
+"""The safe/risky uncertainty analysis (paper §V-B.2, Table IV) from evaluation records.
 
 A frame is one decision of a student in an evaluation episode; its clearance is the minimum
 human–robot clearance of the state the decision was made in (``frames`` of
@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.stats import auroc
 
 __all__ = ["MEASURES", "PAPER_TABLE_IV", "frame_arrays", "safe_risky", "table_iv_markdown"]
@@ -53,8 +54,9 @@ def frame_arrays(
     """Concatenate the per-frame series of ``records`` (those without frames are skipped);
     ``None`` (no human in range / not reported) becomes ``inf`` for clearance, NaN otherwise.
 
-    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap of
-    SPEC 1.3) or ``surface`` (robot centre → nearest human surface, the paper's clearance)."""
+    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap,
+    docs/simulator.md) or ``surface`` (robot centre → nearest human surface, the paper's
+    clearance)."""
     if measure not in MEASURES:
         raise DataError(expect("clearance measure", f"one of {MEASURES}", measure, "pick one"))
     cols: dict[str, list[float]] = {"clearance": [], "aleatoric": [], "epistemic": []}
@@ -86,7 +88,9 @@ def frame_arrays(
 
 
 def safe_risky(
-    records: Iterable[Mapping[str, Any]], threshold: float = 0.8, measure: str = "clearance"
+    records: Iterable[Mapping[str, Any]],
+    threshold: float = RISKY_DISTANCE_M,
+    measure: str = "clearance",
 ) -> dict[str, Any]:
     """Counts, mean uncertainties per class and AUROCs for the frames of ``records``; a frame
     is risky when its ``measure`` (see :func:`frame_arrays`) is ≤ ``threshold``."""

@@ -1,7 +1,7 @@
-"""``pioneer calibrate``: statistics of a world beside the paper's evidence (SPEC 1.5).
+"""``pioneer calibrate``: statistics of a world beside the paper's evidence (docs/calibration.md).
 
-The paper does not publish its world, only numbers that constrain it (REFERENCES.md,
-"Elevator geometry and what the paper's numbers imply"). This module measures the same
+The paper does not publish its world, only numbers that constrain it (paper §V-B
+and Tables I–IV; docs/calibration.md derives what they imply). This module measures the same
 numbers in ours, on **validation** seeds (:mod:`pioneer.seeds`), so the world's free
 parameters — start regions, human timing, human–robot reaction — are chosen by world
 statistics and never by the method comparisons of Tables I–III.
@@ -16,7 +16,7 @@ Statistics per scenario (the keys of ``calibration.json``):
 - ``teacher_path_length_m``, ``teacher_time_s``: mean over the teacher's successes;
 - ``teacher_risky_frame_share``: share of the teacher's decision frames whose distance from
   the robot's centre to the nearest human's *surface* is ≤ 0.8 m (the paper's "clearance",
-  what the LiDAR feature d₁ measures); ``…_gap``: the same with the surface gap of SPEC 1.3;
+  what the LiDAR feature d₁ measures); ``…_gap``: the same with the surface gap (docs/simulator.md);
 - ``risky_at_start_share``: share of episodes whose initial state is risky (no band);
 - ``humans_alone_done_share``: every human arrived or left within the time limit, no robot;
 - ``careless_collision_share``: share of careless episodes that end in a collision;
@@ -37,15 +37,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.progress import progress_bar
 from pioneer.seeds import validation_seed
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
 
-RISKY_CLEARANCE = 0.8  # [m] the paper's safe/risky threshold (Table IV)
+RISKY_CLEARANCE = RISKY_DISTANCE_M  # [m] the paper's safe/risky threshold (Table IV)
 ROBOT_AWAY = 1.0e3  # [m] where the robot stands when the humans walk alone
-# The paper's evidence as bands (REFERENCES.md; the checks of the world issue).
+# The paper's evidence as bands (paper §V-B, Tables I–IV; docs/calibration.md).
 BANDS: dict[str, tuple[float, float]] = {
     "teacher_path_length_m": (3.4, 4.1),  # paper 3.74 (HR-RL), 3.88 (HL-RR)
     "teacher_time_s": (10.0, 15.0),  # paper 12.24, 12.94

@@ -13,15 +13,18 @@ Steps (each output is written atomically; the evaluation resumes if interrupted)
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
+import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pioneer.errors import ConfigError, expect
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
@@ -29,12 +32,14 @@ from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.parallel import worker_count
 
 __all__ = [
-    "EPISODE_S",
     "PAPER_ROWS",
     "PROFILES",
+    "EpisodeTimes",
     "Profile",
+    "episode_times",
     "expected_seconds",
     "jit_cache_warm",
+    "load_episode_times",
     "reproduce",
     "row_times",
 ]
@@ -61,48 +66,100 @@ BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, it
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 
-# Mean wall time of one episode [s] per policy, one worker, measured on the reference 2-core
-# VM in the paper profile of 2026-11-24 (mean over HR-RL and HL-RR; the report's "Where the
-# time went", docs/performance.md). The four teacher rows changed with the reward of
-# 2026-11-25 (efficient demonstrations: episodes end at ≈ 12.5 s instead of 30 s timeouts);
-# they were measured in that day's paper profile on a host 1.4 × slower than the reference
-# (the unchanged rows' ratio: 1.27–1.43) and are divided by 1.4. Only for the expected time
-# that `reproduce` reports before it starts; a policy not listed counts 0.1 s.
-EPISODE_S = {
-    "teacher": 0.442,
-    "teacher-no-density": 0.374,
-    "teacher-no-goal": 0.644,
-    "teacher-no-obstacle": 0.461,
-    "cvar-bf": 0.394,
-    "crowdnav++": 0.039,
-    "crowdnav++-il": 0.039,  # the same network as crowdnav++ (not in the profile)
-    "dwa": 0.079,
-    "sfm": 0.016,
-    "goal": 0.012,
-    "student-mdn": 0.076,
-    "student-mlp": 0.064,
-    "student-shield": 0.106,
-}
+EPISODE_TIMES_FORMAT = "pioneer.episode-times/1"
 
 
-# Fixed costs of a run [s] on the reference VM, beside its episodes (session 15: `make demo`
-# in a fresh clone, 125 s, and the same run again, 97 s, against 79 s of expected episodes):
-# starting the workers and writing the tables, figures and Table IV; and compiling the numba
-# kernels when their on-disk cache is empty, as in a fresh clone (every worker compiles).
-OVERHEAD_S = 15.0
-COLD_JIT_S = 30.0
+@dataclasses.dataclass(frozen=True)
+class EpisodeTimes:
+    """What a run costs on the reference machine (docs/performance.md), measured and stored in
+    ``src/pioneer/data/episode_times.json`` by ``benchmarks/episode_times.py`` from a finished
+    paper-profile run. Only for the expected time that ``reproduce`` announces before it
+    starts."""
+
+    episode_s: Mapping[str, float]  # [s] mean wall time of one episode per policy, one worker
+    default_episode_s: float  # [s] a policy not listed
+    overhead_s: float  # [s] starting the workers, writing the tables, figures and Table IV
+    cold_jit_s: float  # [s] numba compiling the kernels in every worker (empty cache)
+    measured: str  # the date of the measurement (YYYY-MM-DD)
+    machine: str  # what it was measured on
+    source: str = ""  # how it was measured
+    notes: tuple[str, ...] = ()
+
+    def of(self, row: str) -> float:
+        """The mean time [s] of one episode of the policy row ``row``."""
+        return float(self.episode_s.get(row, self.default_episode_s))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (the keys :func:`load_episode_times` reads)."""
+        return {
+            "format": EPISODE_TIMES_FORMAT,
+            "measured": self.measured,
+            "machine": self.machine,
+            "source": self.source,
+            "notes": list(self.notes),
+            "unit": "s",
+            "episode_s": dict(self.episode_s),
+            "default_episode_s": self.default_episode_s,
+            "overhead_s": self.overhead_s,
+            "cold_jit_s": self.cold_jit_s,
+        }
+
+
+def load_episode_times(path: str | Path) -> EpisodeTimes:
+    """Read an episode-times file; a missing, foreign or malformed one raises one
+    :class:`DataError` naming the file and the field."""
+    p = Path(path)
+    fix = "regenerate it with benchmarks/episode_times.py"
+    try:
+        raw = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DataError(
+            expect("episode times", "a readable JSON file", f"{p}: {exc}", fix)
+        ) from exc
+    if not isinstance(raw, dict) or raw.get("format") != EPISODE_TIMES_FORMAT:
+        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
+        raise DataError(expect(f"{p}: format", EPISODE_TIMES_FORMAT, got, fix))
+
+    def seconds(key: str, value: Any) -> float:
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        if not ok or not math.isfinite(value) or value < 0:
+            raise DataError(expect(f"{p}: {key}", "a finite time >= 0 [s]", value, fix))
+        return float(value)
+
+    table = raw.get("episode_s")
+    if not isinstance(table, dict) or not table:
+        raise DataError(expect(f"{p}: episode_s", "a mapping policy -> seconds", table, fix))
+    return EpisodeTimes(
+        episode_s={str(k): seconds(f"episode_s.{k}", v) for k, v in table.items()},
+        default_episode_s=seconds("default_episode_s", raw.get("default_episode_s")),
+        overhead_s=seconds("overhead_s", raw.get("overhead_s")),
+        cold_jit_s=seconds("cold_jit_s", raw.get("cold_jit_s")),
+        measured=str(raw.get("measured", "")),
+        machine=str(raw.get("machine", "")),
+        source=str(raw.get("source", "")),
+        notes=tuple(str(n) for n in raw.get("notes", ())),
+    )
+
+
+@functools.cache
+def episode_times() -> EpisodeTimes:
+    """The shipped measurement (``src/pioneer/data/episode_times.json``), read once."""
+    from pioneer.data import EPISODE_TIMES
+
+    return load_episode_times(EPISODE_TIMES)
 
 
 def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -> float:
     """The expected wall time [s] of ``episodes_per_row`` episodes of each policy row on
-    ``workers`` cores like the reference VM's (:data:`EPISODE_S`)."""
-    cpu = sum(EPISODE_S.get(row, 0.1) for row in rows) * episodes_per_row
+    ``workers`` cores like the reference machine's (:func:`episode_times`)."""
+    times = episode_times()
+    cpu = sum(times.of(row) for row in rows) * episodes_per_row
     return cpu / max(workers, 1)
 
 
 def jit_cache_warm() -> bool:
     """Whether numba's on-disk cache already holds the simulator's step kernel (else the first
-    episode of every worker compiles it: :data:`COLD_JIT_S`)."""
+    episode of every worker compiles it: ``episode_times().cold_jit_s``)."""
     from numba.core import config
 
     import pioneer.sim.kernel as kernel
@@ -257,7 +314,8 @@ def _announce(
     paper = expected_seconds([r for r in rows if r in PAPER_ROWS], per_row, n_workers) * left
     extra = expected_seconds([r for r in rows if r not in PAPER_ROWS], per_row, n_workers) * left
     cold = not jit_cache_warm()
-    fixed = OVERHEAD_S + (COLD_JIT_S if cold else 0.0)
+    times = episode_times()
+    fixed = times.overhead_s + (times.cold_jit_s if cold else 0.0)
     total_s = paper + extra + fixed
     digits = 1 if total_s < 600 else 0  # short runs in tenths of a minute
 
@@ -269,7 +327,7 @@ def _announce(
         f"≈ {minutes(total_s)} min (the paper's rows {minutes(paper)}, the extra rows "
         f"{minutes(extra)}, start-up{', compiling the kernels' if cold else ''} and report "
         f"{minutes(fixed)}) with {n_workers} worker(s) on a machine like the reference 2-core "
-        "VM (docs/performance.md)",
+        f"VM (measured {times.measured}, docs/performance.md)",
         file=sys.stderr,
         flush=True,
     )
@@ -296,11 +354,11 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         fr = frame_arrays(recs, "surface")
         if fr["clearance"].size == 0:
             continue
-        results[sc] = safe_risky(recs, 0.8, "surface")
+        results[sc] = safe_risky(recs, RISKY_DISTANCE_M, "surface")
         p = PAPER_TABLE_IV[sc]
         share = p["frames_risky"] / (p["frames_risky"] + p["frames_safe"])
         finite = fr["clearance"][np.isfinite(fr["clearance"])]
-        thr = float(np.quantile(finite, share)) if finite.size else 0.8
+        thr = float(np.quantile(finite, share)) if finite.size else RISKY_DISTANCE_M
         matched[sc] = safe_risky(recs, thr, "surface")
         risky = fr["clearance"] <= thr
         for name in ("aleatoric", "epistemic"):

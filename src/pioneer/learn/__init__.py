@@ -1,4 +1,4 @@
-"""Students distilled from the teacher (SPEC 6): MDN and MLP, uncertainty, DAgger, the
+"""Students distilled from the teacher (paper §IV-B): MDN and MLP, uncertainty, DAgger, the
 uncertainty shield and ONNX export.
 
 This package imports torch (install the ``learn`` extra). The policies ``student-mdn``,

@@ -5,10 +5,12 @@ are cached per worker process."""
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import torch
+from numpy.typing import NDArray
 
 from pioneer.io import atomic_path
 
@@ -45,6 +47,30 @@ def _student(checkpoint: str) -> Any:
     return _CACHE[key]
 
 
+class _Labelled:
+    """The driving policy (teacher or student) with the teacher labelling every step: ``act``
+    asks the teacher first (prev: the command actually applied, or its own last label), then
+    drives with that label or the student's command."""
+
+    def __init__(self, teacher: Any, student: Any | None, label_prev: str) -> None:
+        self.teacher, self.student, self.label_prev = teacher, student, label_prev
+        self.name = "dagger"
+        self.label = np.zeros(2)
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        self.teacher.reset(info, rng)
+        if self.student is not None:
+            self.student.reset(info, rng)
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
+        state = info["state"]
+        prev = state.command[0] if self.label_prev == "applied" else None
+        self.label = self.teacher.decide(info["world"], state, prev=prev).command
+        if self.student is None:
+            return np.asarray(self.label, dtype=np.float64)
+        return np.asarray(self.student.act(obs, info), dtype=np.float64)
+
+
 def collect_episode(
     scenario: str,
     reward: str,
@@ -57,28 +83,21 @@ def collect_episode(
     labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
     ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
     from pioneer.envs.env import NavEnv
+    from pioneer.envs.episode import Episode, Step
 
     teacher = _teacher(scenario, reward)
     student = _student(checkpoint) if checkpoint is not None else None
-    env = NavEnv(scenario)
-    obs, info = env.reset(seed=env_seed)
-    rng = np.random.default_rng(env_seed)
-    teacher.reset(info, rng)
-    if student is not None:
-        student.reset(info, rng)
+    driver = _Labelled(teacher, student, label_prev)
     rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
-    event = None
-    while event is None:
-        state = info["state"]
-        prev = state.command[0] if label_prev == "applied" else None  # None: its own last label
-        label = teacher.decide(info["world"], state, prev=prev).command
-        u = label if student is None else student.act(obs, info)
-        rows_obs.append(np.asarray(obs, dtype=np.float32))
-        rows_lab.append(label)
-        rows_app.append(np.asarray(u, dtype=np.float64))
-        rows_clear.append(info["min_clearance"])
-        obs, _, _, _, info = env.step(u)
-        event = info["event"]
+
+    def keep(step: Step) -> None:
+        rows_obs.append(np.asarray(step.obs, dtype=np.float32))
+        rows_lab.append(driver.label)
+        rows_app.append(step.command)
+        rows_clear.append(step.info["min_clearance"])
+
+    episode = Episode(NavEnv(scenario), driver, env_seed)
+    info = episode.run(keep)
     n = len(rows_obs)
     unc = (
         np.asarray(student.uncertainty, dtype=np.float64).reshape(n, 2)
@@ -92,7 +111,7 @@ def collect_episode(
         "clearance": np.asarray(rows_clear, dtype=np.float64),
         "aleatoric": unc[:, 0],
         "epistemic": unc[:, 1],
-        "event": np.array(event),
+        "event": np.array(episode.event),
         "time_s": np.array(float(info["time"])),
         "env_seed": np.array(env_seed, dtype=np.int64),
         "scenario": np.array(scenario),

@@ -1,4 +1,4 @@
-"""DAgger: distil the privileged teacher into a LiDAR-only student (paper §IV-B, SPEC 6).
+"""DAgger: distil the privileged teacher into a LiDAR-only student (paper §IV-B).
 
 Round 0 collects ``teacher_episodes`` episodes driven by the teacher; each of the following
 ``rounds`` collects ``episodes_per_round`` episodes driven by the latest student, and the
@@ -57,6 +57,7 @@ from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
+    KINDS,
     MDN,
     Student,
     StudentConfig,
@@ -82,7 +83,7 @@ LABEL_PREV = ("applied", "teacher")
 
 @dataclasses.dataclass(frozen=True)
 class DaggerConfig(Config):
-    """A DAgger run (defaults = SPEC 6: 50 teacher episodes + 10 rounds × 50)."""
+    """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
     scenario: str = "hr-rl"
     student: str = "mdn"  # "mdn" | "mlp"
@@ -103,8 +104,8 @@ class DaggerConfig(Config):
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.student not in ("mdn", "mlp"):
-            raise ConfigError(expect("student", "'mdn' or 'mlp'", self.student, "pick one"))
+        if self.student not in KINDS:
+            raise ConfigError(expect("student", f"one of {KINDS}", self.student, "pick one"))
         if self.action_mode not in ACTION_MODES:
             raise ConfigError(
                 expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")

@@ -1,4 +1,4 @@
-"""ONNX export of a student, for the torch-free robot runtime (SPEC 6, :mod:`pioneer.deploy`).
+"""ONNX export of a student, for the torch-free robot runtime (:mod:`pioneer.deploy`).
 
 The graph has one input ``obs`` (batch, obs_dim) float32 — the 29-D observation, raw (the
 standardisation is inside the graph) — and a dynamic batch axis. Outputs:

@@ -1,4 +1,4 @@
-"""Student networks distilled from the teacher: MDN and MLP, training and checkpoints (SPEC 6).
+"""Student networks distilled from the teacher: MDN and MLP, training and checkpoints (paper §IV-B).
 
 - :class:`MDN`: 29 → 128 → 128 (ReLU, dropout 0.1) → K = 10 diagonal Gaussian components:
   mixture logits (softmax), means and standard deviations (softplus + floor); loss = negative
@@ -74,10 +74,10 @@ KINDS = ("mdn", "mlp")
 
 @dataclasses.dataclass(frozen=True)
 class StudentConfig(Config):
-    """Architecture of a student network (defaults = SPEC 6)."""
+    """Architecture of a student network (defaults = paper §V-B.2)."""
 
     kind: str = "mdn"  # "mdn" (mixture density network) | "mlp" (regression baseline)
-    obs_dim: int = OBS_DIM  # input features (29-D observation, SPEC 1.4)
+    obs_dim: int = OBS_DIM  # input features (29-D observation, paper §III-A)
     hidden: tuple[int, ...] = (128, 128)  # trunk widths, ReLU after each
     dropout: float = 0.1  # after each hidden ReLU (training only)
     n_components: int = 10  # K, mixture components (MDN only)
@@ -302,7 +302,7 @@ _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
 def build_student(config: StudentConfig | None = None, seed: int = 0) -> MDN | MLPStudent:
-    """A freshly initialised student of ``config.kind`` (default: the SPEC 6 MDN)."""
+    """A freshly initialised student of ``config.kind`` (default: the paper's MDN, §V-B.2)."""
     cfg = config or StudentConfig()
     return MDN(cfg, seed) if cfg.kind == "mdn" else MLPStudent(cfg, seed)
 

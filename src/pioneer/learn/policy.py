@@ -1,4 +1,4 @@
-"""Students as policies: the torch student and the registry entries (SPEC 6, 7).
+"""Students as policies: the torch student and the registry entries (paper §IV-B).
 
 Registered names (importing :mod:`pioneer.learn` registers them):
 

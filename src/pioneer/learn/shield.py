@@ -26,9 +26,9 @@ from annotated_types import Interval
 from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative
-from pioneer.control.policy import Policy
 from pioneer.control.registry import build_policy
 from pioneer.control.teacher import LookaheadTeacher
+from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.learn.models import read_checkpoint_meta
 from pioneer.learn.policy import StudentPolicy, make_student_policy

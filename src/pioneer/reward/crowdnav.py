@@ -1,4 +1,4 @@
-"""The CrowdNav++ reward (Liu et al., ICRA 2023; unicycle terms, REFERENCES.md): the reward
+"""The CrowdNav++ reward (Liu et al., ICRA 2023; its public code's unicycle terms): the reward
 the CrowdNav++ baseline is trained on, and the Gymnasium environments' own reward.
 
     r = +10                                  on success
@@ -34,7 +34,7 @@ from pioneer.config import Config
 from pioneer.sim.events import Event, classify
 from pioneer.sim.world import State, World
 
-__all__ = ["CrowdNavRewardConfig", "crowdnav_reward", "crowdnav_reward_terms"]
+__all__ = ["CrowdNavReward", "CrowdNavRewardConfig", "crowdnav_reward", "crowdnav_reward_terms"]
 
 F64 = NDArray[np.float64]
 
@@ -96,11 +96,18 @@ def _constants(rc: CrowdNavRewardConfig, dt: float) -> tuple[float, F64, F64]:
     return per_step, ks, pen
 
 
-def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _Parts:
+def _parts(
+    world: World,
+    prev: State,
+    new: State,
+    rc: CrowdNavRewardConfig,
+    event: NDArray[np.int8] | None = None,
+) -> _Parts:
     sim = world.sim
     dt = sim.dt
     per_step, ks, pen = _constants(rc, dt)
-    event = classify(prev, new, sim.time_limit)
+    if event is None:
+        event = classify(prev, new, sim.time_limit)
     collided, reached = event == _COLLISION, event == _SUCCESS
     d0 = _norm2(prev.goal - prev.robot[:, :2])
     d1 = _norm2(new.goal - new.robot[:, :2])
@@ -124,12 +131,17 @@ def _parts(world: World, prev: State, new: State, rc: CrowdNavRewardConfig) -> _
 
 
 def crowdnav_reward_terms(
-    world: World, prev: State, new: State, config: CrowdNavRewardConfig
+    world: World,
+    prev: State,
+    new: State,
+    config: CrowdNavRewardConfig,
+    event: NDArray[np.int8] | None = None,
 ) -> tuple[dict[str, F64], F64, NDArray[np.int8]]:
     """Per-term rewards ``{name: (B,)}``, their total ``(B,)`` and the event codes ``(B,)``
-    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new``."""
+    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new`` (``event``: the codes when
+    the caller has classified the step already)."""
     rc = config
-    p = _parts(world, prev, new, rc)
+    p = _parts(world, prev, new, rc, event)
     terms = {
         "success": np.where(p.event == _SUCCESS, rc.success, 0.0),
         "collision": np.where(p.event == _COLLISION, rc.collision, 0.0),
@@ -143,9 +155,28 @@ def crowdnav_reward_terms(
 
 
 def crowdnav_reward(
-    world: World, prev: State, new: State, config: CrowdNavRewardConfig
+    world: World,
+    prev: State,
+    new: State,
+    config: CrowdNavRewardConfig,
+    event: NDArray[np.int8] | None = None,
 ) -> tuple[F64, NDArray[np.int8]]:
     """Total reward ``(B,)`` and event codes ``(B,)`` of the step ``prev → new`` (without the
-    per-term breakdown: the trainer's and the vector env's hot path)."""
-    p = _parts(world, prev, new, config)
+    per-term breakdown: the trainer's hot path)."""
+    p = _parts(world, prev, new, config, event)
     return p.total, p.event
+
+
+@dataclasses.dataclass(frozen=True)
+class CrowdNavReward:
+    """The CrowdNav++ reward as an environment's step reward: called with the step and its
+    event codes (the world classifies the step; the reward only prices it), it returns the
+    total ``(B,)`` and the per-term rewards ``{name: (B,)}``."""
+
+    config: CrowdNavRewardConfig = CrowdNavRewardConfig()
+
+    def __call__(
+        self, world: World, prev: State, new: State, event: NDArray[np.int8]
+    ) -> tuple[F64, dict[str, F64]]:
+        terms, total, _ = crowdnav_reward_terms(world, prev, new, self.config, event)
+        return total, terms

@@ -1,6 +1,6 @@
-"""Demonstration datasets: one self-describing ``.npz`` per dataset, no pickle (SPEC 2).
+"""Demonstration datasets: one self-describing ``.npz`` per dataset, no pickle.
 
-Per sample (row): episode id, step, time [s], observation o ∈ R^29 (SPEC 1.4), action
+Per sample (row): episode id, step, time [s], observation o ∈ R^29 (paper §III-A), action
 (v [m/s], ω [rad/s]), fidelity γ ∈ [−1, 1] (+1 desirable, −1 undesirable), robot pose
 (x, y, θ), scenario (index into the metadata's scenario list) and the episode seed. The
 metadata (a JSON string inside the npz) holds the format tag, feature names, units, the source,

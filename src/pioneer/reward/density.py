@@ -12,7 +12,7 @@ stored with the model: the reward then lies in about [−1, 1] and combines with
 
 Choices beyond the paper (docs/reward.md): features are standardised with the training
 statistics; the default length scale is the median pairwise distance of the standardised
-demos (SPEC 3); above ``max_inducing`` demos the
+demos (docs/reward.md); above ``max_inducing`` demos the
 inducing set is chosen by k-means (the demo nearest to each centroid, keeping its own γ) or
 farthest-point sampling.
 """
@@ -114,7 +114,8 @@ def kmeans_medoid_indices(
 
 
 def _median_distance(z: F64, rng: np.random.Generator, max_points: int = 400) -> float:
-    """Median pairwise Euclidean distance of (a subsample of) the standardised demos (SPEC 3).
+    """Median pairwise Euclidean distance of (a subsample of) the standardised demos
+    (docs/reward.md).
 
     This is deliberately broad. In 31-D a kernel this wide gives every rollout state a graded
     reward, so the teacher's candidates are told apart (spread of R_den across candidates

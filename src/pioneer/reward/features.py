@@ -1,7 +1,7 @@
-"""Reward features z of a state–action pair (SPEC 2): one definition for the demonstrations
+"""Reward features z of a state–action pair (paper §IV-A.1): one definition for the demonstrations
 (dataset rows) and the teacher's rollouts.
 
-``xy`` is the robot's position (the static study, paper Sec. IV-A); ``obs_action`` is the
+``xy`` is the robot's position (the static study, paper §V-A); ``obs_action`` is the
 29-D observation (paper eq. 2) followed by the command (v, ω), z ∈ R^31 (the elevator);
 ``obs_action_sincos`` encodes each of the three bearings φ_1, φ_2, φ_g as (cos φ, sin φ), so
 that a bearing just past −π and one just short of π are near neighbours, z ∈ R^34.

@@ -1,6 +1,6 @@
 """Graded demonstrations: a continuous fidelity γ ∈ (−1, 1) from each episode's quality.
 
-The paper labels every demonstration ±1 and names graded labels as a limitation (§VI); the
+The paper labels every demonstration ±1 and names graded labels as a limitation (§V-D); the
 smooth leveraged kernel (eq. 9) takes any γ ∈ [−1, 1]. Here a positive episode's γ is its
 quality q ∈ (0, 1], the product of three scores computed from the dataset's own columns:
 

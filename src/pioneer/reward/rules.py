@@ -1,13 +1,13 @@
-"""Rule-based terms and the distance-adaptive weights of the teacher's score (SPEC 4).
+"""Rule-based terms and the distance-adaptive weights of the teacher's score (paper §IV-A.2).
 
 For a batch of rollouts (leading axis = candidate), with d_goal the distance from the rollout's
 final position x_L to the goal and d_total the initial start–goal distance:
 
-    R_goal = 1 − tanh(d_goal / d_total)                                   (paper eq. 13)
-    R_obs  = tanh(mean_ℓ d_ℓ),  d_ℓ = min(d_ℓ,1, d_ℓ,2) from the observation   (eq. 14)
-    r = clip(d_goal / d_total, 0, 1)
-    α_den = 1 + cos(π (1 − r)),  α_goal = 2 (1 − r),  α_obs = 1                (eq. 16)
-    R = α_den R_den + α_goal R_goal + α_obs R_obs                              (eq. 11)
+    R_goal = 1 − tanh(d_goal / d_total)                                   (paper eq. 15)
+    R_obs  = tanh(mean_ℓ d_ℓ),  d_ℓ = min(d_ℓ,1, d_ℓ,2) from the observation   (eq. 16)
+    r = clip(d_goal / d_total, 0, 1)                                           (eq. 17)
+    α_den = 1 + cos(π (1 − r)),  α_goal = 2 (1 − r),  α_obs = 1                (eq. 18)
+    R = α_den R_den + α_goal R_goal + α_obs R_obs                              (eq. 13)
 
 Every term can be switched off (paper Table II ablation) and every weight overridden.
 """
@@ -25,7 +25,7 @@ __all__ = ["RuleWeights", "adaptive_weights", "combine", "goal_term", "obstacle_
 
 F64 = NDArray[np.float64]
 
-D1_INDEX = 24  # observation index of d_1 (then d_2), SPEC 1.4
+D1_INDEX = 24  # observation index of d_1 (then d_2), paper eq. 2
 
 
 def goal_term(d_goal: F64, d_total: F64 | float) -> F64:
@@ -40,7 +40,7 @@ def obstacle_term(obs_rollout: NDArray[np.floating], n_nearest: int = 2) -> F64:
 
 
 def adaptive_weights(d_goal: F64, d_total: F64 | float) -> tuple[F64, F64, F64]:
-    """(α_den, α_goal, α_obs) for final distances ``(C,)`` (eq. 16)."""
+    """(α_den, α_goal, α_obs) for final distances ``(C,)`` (eq. 18)."""
     r = np.clip(np.asarray(d_goal) / np.maximum(d_total, 1e-9), 0.0, 1.0)
     return 1.0 + np.cos(np.pi * (1.0 - r)), 2.0 * (1.0 - r), np.ones_like(r)
 

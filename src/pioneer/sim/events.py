@@ -1,4 +1,4 @@
-"""How a step ends an episode: one event type and one classifier for every loop (SPEC 1.3).
+"""How a step ends an episode: one event type and one classifier for every loop.
 
 An episode ends at the first step that collides (humans or walls, swept over the step) or
 reaches the goal — a collision wins when both happen in one step — or, failing both, when the

@@ -1,4 +1,4 @@
-"""Social-force humans (Helbing & Molnár 1995), vectorised in numba (SPEC 1.2).
+"""Social-force humans (Helbing & Molnár 1995; paper §V-B), vectorised in numba.
 
 For a walking human i with position p_i, velocity v_i, radius r_i and preferred speed
 v_pref,i heading to its current waypoint w_i:
@@ -10,9 +10,10 @@ v_pref,i heading to its current waypoint w_i:
 
 with e_i = (w_i − p_i)/‖w_i − p_i‖ and n the unit vector pointing away from the other body.
 This is the exponential circular-specification form used by CrowdNav++ and the CVaR-BF
-experiments (REFERENCES.md); A = 2.0 m/s², B = 0.5 m is the CVaR-BF preset. Walls use the
-same strength with Helbing–Molnár's shorter range (0.2 m): with the paper's 0.6 m body radius
-a 0.5 m wall range makes the 1.8 m door repel people more than their own drive pulls them.
+experiments (their public code, docs/simulator.md); A = 2.0 m/s², B = 0.5 m is the CVaR-BF
+preset. Walls use the same strength with Helbing–Molnár's shorter range (0.2 m): with the
+paper's 0.6 m body radius a 0.5 m wall range makes the 1.8 m door repel people more than
+their own drive pulls them.
 
 Integration is semi-implicit Euler: v ← cap(v + f h), p ← p + v h, with the speed cap
 ‖v‖ ≤ 1.3 · v_pref (never a cap on the *initial* speed, so a human starting at rest moves).
@@ -69,7 +70,8 @@ A_ROBOT_WEAK = 0.5  # [m/s²] the paper world's human–robot strength (docs/cal
 # Named parameter sets: overrides of the defaults (the ``paper`` preset).
 PRESETS: dict[str, dict[str, float]] = {
     "paper": {},
-    # The paper's prior implementations (REFERENCES.md): both use K = 1 (τ = 1 s).
+    # The paper's prior implementations, CrowdNav++ and CVaR-BF (their public code,
+    # docs/simulator.md), both use K = 1 (τ = 1 s).
     "cvar-bf": {"tau": 1.0, "a_robot": 2.0},  # reacting humans: same A, B for the robot
     "crowdnav": {"tau": 1.0, "b_human": 1.0, "a_robot": 0.0, "b_robot": 1.0, "b_wall": 1.0},
     # The earlier default (the compact world): humans make way for the robot as for a human.

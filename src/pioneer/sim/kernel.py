@@ -2,7 +2,7 @@
 
 - :func:`step_kernel` — one step of every copy (``pioneer.sim.world.step``): the humans in
   substeps of the social-force model (:func:`~pioneer.sim.humans.sfm_substep`), the robot
-  along its exact arc, and the swept collision checks of SPEC 1.3 (module docstring of
+  along its exact arc, and the swept collision checks (module docstring of
   :mod:`pioneer.sim.world`);
 - :func:`trajectory_kernel` — L calls of ``step_kernel`` in one call, recording each step's
   robot pose, the humans as LiDAR circles and the running minimum clearances (the teacher's

@@ -1,4 +1,4 @@
-"""2-D LiDAR ray casting and the batched 29-D observation (SPEC 1.4), numba kernels.
+"""2-D LiDAR ray casting and the batched 29-D observation (paper §III-A), numba kernels.
 
 The beam layout (:class:`LidarConfig`), the observation's definition and the real-scan
 adapter are in :mod:`pioneer.laser` (numpy only, for the robot-side runtime) and re-exported
@@ -168,7 +168,7 @@ def _observation_kernel(
 def observation_from_ranges(
     ranges: NDArray[np.float64], goal_bearing: NDArray[np.float64] | float, cfg: LidarConfig
 ) -> NDArray[np.float32]:
-    """The observation of SPEC 1.4 from beam ranges ``(P, G)`` or ``(G,)``.
+    """The observation (paper §III-A, eq. 2) from beam ranges ``(P, G)`` or ``(G,)``.
 
     ``goal_bearing`` [rad] is the goal direction relative to the heading (any value; it is
     wrapped). Returns ``(P, obs_dim)`` float32, or ``(obs_dim,)`` for a single scan.

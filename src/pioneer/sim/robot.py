@@ -1,4 +1,4 @@
-"""Unicycle robot: configuration, command clipping and exact integration (SPEC 1.1).
+"""Unicycle robot: configuration, command clipping and exact integration.
 
 Kinematics (paper §III-A): ṗx = v cos θ, ṗy = v sin θ, θ̇ = ω. With the command held over a
 step of length h the solution is an arc (ω ≠ 0) or a straight line (ω = 0); we integrate it

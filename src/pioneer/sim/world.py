@@ -7,7 +7,7 @@ teacher's 120 candidate rollouts).
 
 Within a step of length Δt the humans are integrated in substeps of at most
 ``SocialForceConfig.max_substep`` and the robot moves along its exact arc. Collisions are
-checked on the swept motion of every substep (SPEC 1.3): the closest approach of the robot
+checked on the swept motion of every substep (docs/simulator.md): the closest approach of the robot
 and each human moving linearly over the substep, and the distance between the robot's chord
 and every wall segment, both made conservative by the chord–arc deviation v·h·|ω·h|/8.
 """
@@ -32,8 +32,8 @@ from pioneer.sim.robot import RobotConfig, validate_command
 __all__ = [
     "SimConfig",
     "State",
-    "Trajectory",
     "World",
+    "WorldTrace",
     "advance",
     "goal_bearing",
     "observe",
@@ -241,7 +241,7 @@ def step(world: World, state: State, command: F64 | list[float], dt: float | Non
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class Trajectory:
+class WorldTrace:
     """L steps of B copies under constant commands (:func:`advance`), every step recorded.
 
     A copy stopped at its collision (``advance(…, stop_at_collision=True)``) keeps its
@@ -292,7 +292,7 @@ def advance(
     dt: float,
     n_steps: int,
     stop_at_collision: bool = False,
-) -> Trajectory:
+) -> WorldTrace:
     """``n_steps`` calls of :func:`step` with the commands ``(B, 2)`` held, in one kernel call,
     recording every step (bit for bit the values of the repeated ``step``; tested).
 
@@ -317,7 +317,7 @@ def advance(
         new.robot, new.h_pos, new.h_radius, new.h_status, new.collided, new.clearance,
         new.wall_clearance, poses, circles, clear, wclear, live,
     )  # fmt: skip
-    return Trajectory(new, poses, circles, clear, wclear, live)
+    return WorldTrace(new, poses, circles, clear, wclear, live)
 
 
 def step_kernel_args(
@@ -393,7 +393,7 @@ def goal_bearing(state: State) -> F64:
 def observe(
     world: World, state: State, rng: np.random.Generator | None = None
 ) -> NDArray[np.float32]:
-    """The 29-D observation of every copy (SPEC 1.4), shape ``(B, 29)`` float32."""
+    """The 29-D observation of every copy (paper §III-A, eq. 2), shape ``(B, 29)`` float32."""
     return observation_from_ranges(scan(world, state, rng), goal_bearing(state), world.sim.lidar)
 
 

@@ -53,7 +53,7 @@ import functools
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -77,9 +77,9 @@ from pioneer.baselines.crowdnav.observation import (
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.io import to_json
-from pioneer.sim.events import Event, classify
-from pioneer.sim.scenarios import ScenarioConfig, sample_state
-from pioneer.sim.world import State, World, step
+from pioneer.sim.events import Event
+from pioneer.sim.scenarios import ScenarioConfig
+from pioneer.sim.world import State, World
 
 __all__ = [
     "BCData",
@@ -172,6 +172,54 @@ def action_from_command(
 
 
 # ------------------------------------------------------------------------------ collection
+class _Imitation:
+    """The episode's driver: the teacher (its clipped action) or the model's mean action
+    (DAgger), with every step's observation, teacher label and applied command kept."""
+
+    name = "crowdnav-imitation"
+
+    def __init__(
+        self, teacher: Any, net_cfg: CrowdNavConfig, model: CrowdNavNet | None, world: World
+    ) -> None:
+        self.teacher, self.net_cfg, self.model, self.world = teacher, net_cfg, model, world
+        self.cols: dict[str, list[Any]] = {
+            k: []
+            for k in (
+                "robot",
+                "temporal",
+                "spatial",
+                "mask",
+                "action",
+                "teacher_command",
+                "command",
+            )
+        }
+        self._h: Any = None
+
+    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
+        self._h = self.model.initial_state(1) if self.model is not None else None
+
+    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
+        s: State = info["state"]
+        world, sim, net_cfg = self.world, self.world.sim, self.net_cfg
+        graph = build_observation(s, world, net_cfg)
+        u_star = expert_command(self.teacher, world, s)
+        a_star = action_from_command(u_star, s.command[:, 0], sim.dt, net_cfg)
+        if self.model is None:
+            a = a_star
+        else:
+            with torch.inference_mode():
+                mean, _, self._h = self.model(*obs_tensors(graph), self._h)
+            a = mean.numpy().astype(np.float64)
+        cmd = command_from_action(a, s.command[:, 0], sim.robot, sim.dt, net_cfg)
+        for k, x in zip(("robot", "temporal", "spatial", "mask"), graph, strict=True):
+            self.cols[k].append(x)
+        self.cols["action"].append(a_star.astype(np.float32))
+        self.cols["teacher_command"].append(u_star.reshape(1, 2))
+        self.cols["command"].append(cmd)
+        return np.asarray(cmd[0], dtype=np.float64)
+
+
 def collect_episodes(
     scenario: ScenarioConfig,
     world: World,
@@ -186,43 +234,20 @@ def collect_episodes(
     ``model`` ``None``: the teacher drives through the policy's action space (its clipped
     action is applied); otherwise the model's mean action drives (DAgger).
     """
-    sim = world.sim
-    cols: dict[str, list[Any]] = {
-        k: []
-        for k in ("robot", "temporal", "spatial", "mask", "action", "teacher_command", "command")
-    }
+    from pioneer.envs.env import NavEnv
+    from pioneer.envs.episode import Episode
+
+    env = NavEnv(scenario)
+    driver = _Imitation(teacher, net_cfg, model, world)
     episode: list[NDArray[np.int64]] = []
     events: list[int] = []
     for e, seed in enumerate(seeds):
-        s: State = sample_state(scenario, np.random.default_rng(int(seed)))
-        h = model.initial_state(1) if model is not None else None
-        n = 0
-        while True:
-            obs = build_observation(s, world, net_cfg)
-            u_star = expert_command(teacher, world, s)
-            a_star = action_from_command(u_star, s.command[:, 0], sim.dt, net_cfg)
-            if model is None:
-                a = a_star
-            else:
-                with torch.inference_mode():
-                    mean, _, h = model(*obs_tensors(obs), h)
-                a = mean.numpy().astype(np.float64)
-            cmd = command_from_action(a, s.command[:, 0], sim.robot, sim.dt, net_cfg)
-            for k, x in zip(("robot", "temporal", "spatial", "mask"), obs, strict=True):
-                cols[k].append(x)
-            cols["action"].append(a_star.astype(np.float32))
-            cols["teacher_command"].append(u_star.reshape(1, 2))
-            cols["command"].append(cmd)
-            n += 1
-            new = step(world, s, cmd)
-            event = int(classify(s, new, sim.time_limit)[0])
-            s = new
-            if event != Event.NONE:
-                break
-        events.append(event)
-        episode.append(np.full(n, e, dtype=np.int64))
+        run = Episode(env, driver, int(seed))
+        run.run()
+        events.append(int(Event[str(run.event).upper()]))
+        episode.append(np.full(run.steps, e, dtype=np.int64))
     return BCData(
-        **{k: np.concatenate(v) for k, v in cols.items()},
+        **{k: np.concatenate(v) for k, v in driver.cols.items()},
         episode=np.concatenate(episode),
         ep_seed=np.asarray(seeds, dtype=np.int64),
         ep_round=np.full(len(seeds), round_index, dtype=np.int64),

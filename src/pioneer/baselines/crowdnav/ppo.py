@@ -1,4 +1,4 @@
-"""PPO training of the CrowdNav++ baseline in a PioneeR scenario (SPEC 5; REFERENCES CrowdNav++).
+"""PPO training of the CrowdNav++ baseline (Liu et al., ICRA 2023) in a PioneeR scenario.
 
 ``pioneer train crowdnav++ --scenario hr-rl --out DIR`` calls :func:`train_crowdnav`.
 

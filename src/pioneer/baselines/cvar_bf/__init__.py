@@ -1,4 +1,4 @@
-"""CVaR barrier-function safety filter with adaptive risk (Wang et al., IROS 2025; SPEC 5).
+"""CVaR barrier-function safety filter with adaptive risk (Wang et al., IROS 2025).
 
 Baseline ``cvar-bf`` of the paper's Table I: Wang, Kim, Hoxha, Fainekos, Panagou, "Safe
 Navigation in Uncertain Crowded Environments Using Risk Adaptive CVaR Barrier Functions",
@@ -20,7 +20,7 @@ v_nom = v_max · max(0, cos φ) · min(1, ‖g − p_r‖ / d_slow).
     p_l⁺ = p_l + J(θ) u Δt                                   (next look-ahead point, linear in u)
 
 The robot's centre moves only along its heading within one step, so a barrier on the centre
-could brake but never steer; on p_l the turn rate ω acts at first order. Radii are the SPEC's
+could brake but never steer; on p_l the turn rate ω acts at first order. Radii are CVaR-BF's
 R = r_r + r_h (+ ``margin``) measured from p_l: when a person is ahead (the usual approach) p_l
 is nearer to them than the centre and the barrier is conservative; for a person beside or
 behind, the body may come up to ℓ closer than the barrier says. ``cover_body=True`` inflates

@@ -43,7 +43,7 @@ _USABLE = ("solved", "solved inaccurate", "maximum iterations reached")
 
 
 class CvarBfPolicy:
-    """CVaR-BF as a :class:`~pioneer.control.policy.Policy` (privileged: reads ``info["state"]``).
+    """CVaR-BF as a :class:`~pioneer.envs.policy.Policy` (privileged: reads ``info["state"]``).
 
     See the module docstring for the formulation. ``rng`` given to ``reset`` seeds the
     sampling of human positions; the global numpy RNG is never used.

@@ -1,4 +1,4 @@
-"""Scenarios as data: elevator co-boarding (HR-RL, HL-RR) and the static study (SPEC 1.5).
+"""Scenarios as data: elevator co-boarding (HR-RL, HL-RR) and the static study (paper §V-A, §V-B).
 
 Coordinate frame: origin at the centre of the elevator door on the wall line, +y into the
 cabin. A :class:`ScenarioConfig` holds walls, map bounds, sampling regions and the human

@@ -9,7 +9,7 @@ returns them as scenario-file entries (``pioneer.scenarios/1``, each with the bu
 of its side, whose demonstrations give the teacher's reward); a draw that cannot place its
 bodies for the start seeds a scenario file is checked with is redrawn, and counted.
 
-    pioneer scenarios sample --n 200 --seed 0 --out runs/general/layouts.json
+    pioneer sample-layouts --n 200 --seed 0 --out runs/general/layouts.json
 """
 
 from __future__ import annotations

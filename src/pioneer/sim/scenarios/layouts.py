@@ -1,5 +1,5 @@
 """The scenario families: elevator co-boarding (HR-RL, HL-RR; paper world and the compact
-world) and the static study, each built from a typed layout (SPEC 1.5)."""
+world) and the static study, each built from a typed layout (docs/simulator.md)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from pioneer.sim.world import SimConfig
 
 @dataclasses.dataclass(frozen=True)
 class ElevatorLayout(Config):
-    """Geometry and population of the elevator co-boarding scenario (paper §V-B, SPEC 1.5).
+    """Geometry and population of the elevator co-boarding scenario (paper §V-B;
+    docs/calibration.md).
 
     The defaults are the paper world: a 4 × 4 m lobby in front of the attached 2.5 × 2.7 m
     cabin. Positions are in HR-RL coordinates (humans board to the right half); ``human_side =

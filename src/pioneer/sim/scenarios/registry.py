@@ -53,7 +53,9 @@ _REGISTRY: dict[str, Callable[[], ScenarioConfig]] = {
     "static": static_study_scenario,
 }
 _BUILTIN = frozenset(_REGISTRY)
-_BASES: dict[str, str] = {}  # variant → built-in scenario whose learned parts it uses
+# Variant → the built-in scenario whose learned parts it uses. The 0.3 m-body presets are the
+# paper world with thinner people: they use its demonstrations, reward and students.
+_BASES: dict[str, str] = {"hr-rl-r03": "hr-rl", "hl-rr-r03": "hl-rr"}
 
 
 def _key(name: str) -> str:
@@ -124,7 +126,7 @@ def check_placement(where: str, cfg: ScenarioConfig) -> None:
 def _register(name: str, factory: Callable[[], ScenarioConfig], base: str | None) -> None:
     key = _key(name)
     _REGISTRY[key] = factory
-    if base is None:
+    if base is None and key not in _BUILTIN:
         _BASES.pop(key, None)
     else:
         _BASES[key] = _key(base)

@@ -1,4 +1,4 @@
-"""Scenario data: sampling regions, human specifications and the scenario config (SPEC 1.5)."""
+"""Scenario data: sampling regions, human specifications and the scenario config."""
 
 from __future__ import annotations
 

@@ -50,7 +50,7 @@ def test_unknown_scenario_names_field_and_lists_names():
 
 
 def test_compact_elevator_geometry_matches_spec():
-    """The compact world (SPEC 1.5, the earlier default); the paper world: test_paper_world."""
+    """The compact world (the earlier default); the paper world: test_paper_world."""
     cfg = get_scenario("hr-rl-compact")
     walls = np.asarray(cfg.walls)
     assert cfg.bounds == (-2.0, 2.0, -1.3, 2.7)
@@ -530,7 +530,7 @@ def test_the_example_scenario_file_loads_and_every_variant_samples(clean_registr
     from pioneer.data import shipped_student
 
     sc = clean_registry
-    path = Path(__file__).resolve().parents[2] / "examples" / "scenarios.json"
+    path = Path(__file__).resolve().parents[3] / "examples" / "scenarios.json"
     names = sc.load_scenario_file(path)
     assert len(names) >= 5
     for name in names:

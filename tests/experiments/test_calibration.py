@@ -1,4 +1,4 @@
-"""``pioneer calibrate``: world statistics on validation seeds (SPEC 1.5)."""
+"""``pioneer calibrate``: world statistics on validation seeds (docs/calibration.md)."""
 
 from __future__ import annotations
 

@@ -117,7 +117,7 @@ def test_the_command_writes_a_scenario_file(tmp_path):
 def test_the_held_out_layouts_lie_outside_the_training_distribution(clean_registry):
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[2] / "examples" / "held_out_layouts.json"
+    path = Path(__file__).resolve().parents[3] / "examples" / "held_out_layouts.json"
     names = scenarios.load_scenario_file(path)
     assert len(names) == 6
     dist = LayoutDistribution()

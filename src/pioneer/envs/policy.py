@@ -1,6 +1,6 @@
 """The one interface every controller implements: teacher, baselines and students.
 
-A policy sees the observation (29-D, SPEC 1.4) and the environment's ``info`` dict, whose
+A policy sees the observation (29-D, paper §III-A) and the environment's ``info`` dict, whose
 ``state`` and ``world`` entries give privileged controllers the full simulator state. Policies
 hold their own RNG, seeded by ``reset``, and never touch the global numpy RNG. Policies are
 constructed by name through :mod:`pioneer.control.registry`.

@@ -1,4 +1,4 @@
-"""The ``pioneer demos``/``reward``/``study`` subcommands: files written, JSON printed, errors."""
+"""The ``pioneer demos``/``reward`` subcommands: files written, JSON printed, errors."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from pioneer.cli import main
 from pioneer.reward.dataset import Dataset
@@ -144,21 +143,3 @@ def test_demos_show_of_a_model_file_is_one_line(demos_file, tmp_path, capsys):
     capsys.readouterr()
     assert main(["demos", "show", str(model)]) == 2
     _one_line_error(capsys)
-
-
-@pytest.mark.slow
-def test_study_static_writes_the_figure(tmp_path, capsys):
-    out = tmp_path / "study"
-    assert main(["study", "static", "--out", str(out)]) == 0
-    summary = _json(capsys)
-    png = out / "static_study.png"
-    assert png.is_file() and summary["figure"] == str(png)
-    with Image.open(png) as im:
-        assert im.format == "PNG" and im.size[0] > 300
-    print(
-        f"\nstatic study near the human: positives only {summary['reward_near_human_pos_only']:.4f}"
-        f", positives + negatives {summary['reward_near_human_pos_neg']:.4f}"
-    )
-    assert summary["reward_near_human_pos_neg"] < summary["reward_near_human_pos_only"]
-    assert len(summary["teacher_events"]) == 6
-    assert summary["teacher_events"].count("collision") == 0

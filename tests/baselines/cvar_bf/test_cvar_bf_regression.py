@@ -31,7 +31,7 @@ a level feasible: its ADMM solves stopped at the iteration limit on levels with 
 
 After an *intended* change of CVaR-BF's behaviour, regenerate and say why in the commit::
 
-    .venv/bin/python tests/control/test_cvar_bf_regression.py --regenerate
+    .venv/bin/python tests/baselines/cvar_bf/test_cvar_bf_regression.py --regenerate
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from pioneer.control.registry import build_policy
 from pioneer.envs.env import NavEnv
 from pioneer.sim.world import World
 
-if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:
+if (_TESTS := str(Path(__file__).resolve().parents[2])) not in sys.path:
     sys.path.insert(0, _TESTS)  # run as a script (--regenerate); under pytest conftest does it
 
 from pioneer_testutils import keyed_runs, load_reference, regenerate_reference

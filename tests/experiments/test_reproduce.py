@@ -75,18 +75,19 @@ def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys, monkey
     import pioneer.experiments.reproduce as rep
 
     rows = ["teacher", "teacher-no-goal", "teacher-no-density", "goal"]  # ≥ 10 min: whole minutes
-    per_episode = sum(rep.EPISODE_S[row] for row in rows)
+    times = rep.episode_times()
+    per_episode = sum(times.episode_s[row] for row in rows)
     assert rep.expected_seconds(rows, 1000, 2) == pytest.approx(per_episode * 500)
     assert rep.expected_seconds(rows, 1000, 1) == pytest.approx(per_episode * 1000)
-    assert rep.expected_seconds(["unknown"], 10, 1) == pytest.approx(1.0)
+    assert rep.expected_seconds(["unknown"], 10, 1) == pytest.approx(10 * times.default_episode_s)
     monkeypatch.setattr(rep, "jit_cache_warm", lambda: warm)
     rep._announce("paper", rep.PROFILES["paper"], rows, tmp_path, workers=2)
     line = capsys.readouterr().err.strip()
     assert line.startswith("pioneer reproduce --profile paper: 4,000 episodes (0 done)")
     teachers = ("teacher", "teacher-no-goal", "teacher-no-density")
-    paper = sum(rep.EPISODE_S[row] for row in teachers) * 500 / 60
-    extra = rep.EPISODE_S["goal"] * 500 / 60
-    fixed = (rep.OVERHEAD_S + (0.0 if warm else rep.COLD_JIT_S)) / 60
+    paper = sum(times.episode_s[row] for row in teachers) * 500 / 60
+    extra = times.episode_s["goal"] * 500 / 60
+    fixed = (times.overhead_s + (0.0 if warm else times.cold_jit_s)) / 60
     compiling = "" if warm else ", compiling the kernels"
     assert (
         f"expected ≈ {paper + extra + fixed:.0f} min (the paper's rows {paper:.0f}, the extra "
@@ -100,10 +101,59 @@ def test_a_short_run_is_announced_in_tenths_of_a_minute(tmp_path, capsys, monkey
     monkeypatch.setattr(rep, "jit_cache_warm", lambda: False)
     rep._announce("smoke", rep.PROFILES["smoke"], ["goal"], tmp_path, workers=1)
     line = capsys.readouterr().err.strip()
-    episodes = rep.EPISODE_S["goal"] * 2 / 60
-    fixed = (rep.OVERHEAD_S + rep.COLD_JIT_S) / 60
+    times = rep.episode_times()
+    episodes = times.episode_s["goal"] * 2 / 60
+    fixed = (times.overhead_s + times.cold_jit_s) / 60
     assert f"expected ≈ {episodes + fixed:.1f} min (the paper's rows 0.0, the extra rows" in line
     assert f"start-up, compiling the kernels and report {fixed:.1f})" in line
+
+
+def test_the_shipped_episode_times_cover_every_row_of_the_run():
+    from pioneer.experiments.reproduce import episode_times
+
+    times = episode_times()
+    rows = (*TEACHERS, *BASELINES, *CLASSIC, *STUDENTS, SHIELD)
+    assert set(rows) <= set(times.episode_s)
+    assert all(s > 0 for s in times.episode_s.values())
+    assert times.measured and times.machine  # a measurement names its date and machine
+
+
+def test_episode_times_round_trip_and_refuse_bad_files(tmp_path):
+    from pioneer.errors import DataError
+    from pioneer.experiments.reproduce import episode_times, load_episode_times
+
+    p = tmp_path / "times.json"
+    p.write_text(json.dumps(episode_times().to_dict()))
+    assert load_episode_times(p) == episode_times()
+    bad = {**episode_times().to_dict(), "overhead_s": -1}
+    p.write_text(json.dumps(bad))
+    with pytest.raises(DataError, match="overhead_s"):
+        load_episode_times(p)
+    p.write_text(json.dumps({"format": "something/1"}))
+    with pytest.raises(DataError, match="format"):
+        load_episode_times(p)
+    with pytest.raises(DataError, match="readable JSON"):
+        load_episode_times(tmp_path / "absent.json")
+
+
+def test_the_benchmark_script_updates_the_rows_it_measured(monkeypatch):
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))  # the repository
+    from benchmarks import episode_times as bench
+
+    from pioneer.experiments.reproduce import episode_times
+
+    old = episode_times()
+    records = [
+        {"policy": "goal", "wall_time_s": 0.2},
+        {"policy": "goal", "wall_time_s": 0.4},
+        {"policy": "my-policy", "wall_time_s": 1.0},
+    ]
+    new = bench.updated(old, records, "2030-01-02", "a machine", scale=2.0)
+    assert new.of("goal") == pytest.approx(0.15) and new.of("my-policy") == pytest.approx(0.5)
+    assert new.of("teacher") == old.of("teacher")  # not in the run: kept
+    assert new.measured == "2030-01-02" and new.machine == "a machine"
+    assert "divided by 2" in new.source
+    assert any("cvar-bf" in n and old.measured in n for n in new.notes)  # kept rows named
 
 
 def test_the_jit_cache_is_found_where_numba_keeps_it(tmp_path, monkeypatch):

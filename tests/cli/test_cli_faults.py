@@ -1,4 +1,4 @@
-"""Every ``pioneer`` command through the same output faults (issue 19, item 1).
+"""Every ``pioneer`` command through the same output faults.
 
 One table of commands, one of faults. Each pair must end in one ``pioneer: error:`` line
 with exit code 2 that names the path. The thing at the path stays as it was (a FIFO stays a

@@ -1,0 +1,121 @@
+"""The seconds per episode that ``pioneer reproduce`` announces its expected time from.
+
+After a paper-profile run on the reference machine (docs/performance.md)::
+
+    pioneer reproduce --profile paper --out runs/paper --workers 2
+    .venv/bin/python benchmarks/episode_times.py runs/paper
+
+writes every policy row's mean wall time of one episode (over both scenarios and every
+invocation of a resumed run) into ``src/pioneer/data/episode_times.json``, with the date of
+the run and the machine it ran on. Rows the run did not evaluate keep their earlier figures.
+``--scale F`` divides the measured times by F, for a run on a host F times slower than the
+reference (say why with ``--note``); the notes of the earlier file are replaced.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+# Run as a script, sys.path[0] is this file's folder: replace it with the repository, so the
+# benchmarks import as one package.
+if sys.path and Path(sys.path[0] or ".").resolve() == Path(__file__).resolve().parent:
+    sys.path.pop(0)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pioneer.data import EPISODE_TIMES
+from pioneer.eval.harness import EPISODES_FILE, read_records
+from pioneer.experiments.reproduce import EpisodeTimes, load_episode_times, row_times
+from pioneer.io import write_text_atomic
+
+
+def machine_line() -> str:
+    """One line naming the machine this runs on (what ``make bench`` records, abridged)."""
+    from benchmarks.results import machine_info
+
+    m = machine_info()
+    simd = "+".join(m["simd"]) or "no SIMD"
+    return (
+        f"{m['cpu_model'] or m['machine']} ({m['llvm_host_cpu']}: {simd}), "
+        f"{m['cpu_count']} CPUs, {m['platform']}, Python {m['python']}, numpy {m['numpy']}, "
+        f"numba {m['numba']}"
+    )
+
+
+def measured(
+    records: list[dict[str, Any]], scale: float = 1.0, digits: int = 3
+) -> dict[str, float]:
+    """Mean wall time [s] of one episode per policy row, divided by ``scale``."""
+    return {
+        row: round(sec / n / scale, digits) for row, (n, sec) in row_times(records).items() if n
+    }
+
+
+def updated(
+    old: EpisodeTimes,
+    records: list[dict[str, Any]],
+    when: str,
+    machine: str,
+    scale: float = 1.0,
+    notes: tuple[str, ...] = (),
+) -> EpisodeTimes:
+    """``old`` with the rows of ``records`` re-measured; the others are kept, and a note
+    says so. ``notes`` replace the old ones."""
+    new = measured(records, scale)
+    kept = sorted(set(old.episode_s) - set(new))
+    if kept:
+        notes = (*notes, f"{', '.join(kept)}: not in this run, kept from {old.measured}.")
+    source = (
+        "pioneer reproduce: per policy, the mean wall time of one episode over its scenarios "
+        "(the report's 'Where the time went')"
+    )
+    if scale != 1.0:
+        source += f", divided by {scale:g} (a host that much slower than the reference)"
+    return dataclasses.replace(
+        old,
+        episode_s={**old.episode_s, **new},
+        measured=when,
+        machine=machine,
+        source=source,
+        notes=notes,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("run", type=Path, help="the --out folder of a pioneer reproduce run")
+    parser.add_argument(
+        "--output", type=Path, default=EPISODE_TIMES, help="episode-times JSON (%(default)s)"
+    )
+    parser.add_argument("--scale", type=float, default=1.0, help="divide the times by this")
+    parser.add_argument("--note", action="append", default=[], help="a note to store (repeat)")
+    args = parser.parse_args(argv)
+    if not args.scale > 0:
+        parser.error("--scale must be > 0")
+    episodes = args.run / "eval" / EPISODES_FILE
+    records = read_records(episodes)
+    if not records:
+        parser.error(f"no episode records in {episodes}")
+    when = datetime.datetime.fromtimestamp(episodes.stat().st_mtime, datetime.UTC).date()
+    times = updated(
+        load_episode_times(args.output),
+        records,
+        when.isoformat(),
+        machine_line(),
+        args.scale,
+        tuple(args.note),
+    )
+    write_text_atomic(args.output, json.dumps(times.to_dict(), indent=2) + "\n")
+    for row in sorted(measured(records)):
+        print(f"{row:24s} {times.of(row):.3f} s")
+    print(f"wrote {args.output} (measured {times.measured})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
