@@ -51,6 +51,7 @@ import torch
 from numpy.typing import NDArray
 
 from pioneer.config import Config
+from pioneer.data import base_scenario
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import kept
@@ -303,23 +304,33 @@ def _kept(cfg: DaggerConfig, out: Path) -> str:
 def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> list[str]:
     """The run's scenarios, after checking every input against them and ``out`` (reads only,
     so a refused run leaves the file system as it was): the reward file loads and fits each
-    scenario, or each has the shipped demos of the default reward; a resumed run has the same
-    settings and scenario definitions."""
-    from pioneer.control.parts import check_teacher
-    from pioneer.reward.default import check_reward_fits
+    scenario, or the default reward each needs can be fitted (on its base's shipped demos);
+    a resumed run has the same settings and scenario definitions."""
+    from pioneer.reward.default import check_reward_fits, default_reward
     from pioneer.reward.density import DensityReward
 
     names = scenario_set(cfg.scenario)
-    model = DensityReward.load(reward) if reward is not None else None
-    for name in names:
-        if model is None:
-            check_teacher(name, {})  # the shipped demos of the default reward
-        else:
-            check_reward_fits(model, name, str(reward))
     output_dir_kind(out)
     _check_config(out, cfg)
     _check_scenario(out, names)
+    if reward is not None:
+        model = DensityReward.load(reward)
+        for name in names:
+            check_reward_fits(model, name, str(reward))
+    else:
+        for name, path in _default_reward_paths(out, names).items():
+            if not path.exists():
+                default_reward(base_scenario(name))  # cached: _prepare saves this very fit
     return names
+
+
+def _default_reward_paths(out: Path, names: list[str]) -> dict[str, Path]:
+    """Where the default reward of each scenario's base is kept: ``DIR/reward.npz`` for one
+    scenario, ``DIR/reward-BASE.npz`` for a pattern."""
+    return {
+        name: inside(out, "reward.npz" if len(names) == 1 else f"reward-{base_scenario(name)}.npz")
+        for name in names
+    }
 
 
 def _prepare(
@@ -327,9 +338,8 @@ def _prepare(
 ) -> dict[str, Path]:
     """Record the run's settings and scenarios in ``out`` (holding its lock; checked by
     :func:`_check_inputs`) and return the teacher's reward file per scenario: ``reward`` for
-    all, else the one fitted on the shipped demos of the scenario's base (``DIR/reward.npz``
-    for one scenario, ``DIR/reward-BASE.npz`` for a pattern)."""
-    from pioneer.data import base_scenario
+    all, else the one fitted on the shipped demos of the scenario's base
+    (:func:`_default_reward_paths`)."""
     from pioneer.io import remove_partial_writes
 
     _check_config(out, cfg)  # again, holding the lock
@@ -342,12 +352,10 @@ def _prepare(
         return dict.fromkeys(names, Path(reward))
     from pioneer.reward.default import default_reward
 
-    paths = {}
-    for name in names:
-        base = base_scenario(name)
-        paths[name] = inside(out, "reward.npz" if len(names) == 1 else f"reward-{base}.npz")
-        if not paths[name].exists():
-            default_reward(base).save(paths[name])
+    paths = _default_reward_paths(out, names)
+    for name, path in paths.items():
+        if not path.exists():
+            default_reward(base_scenario(name)).save(path)
     return paths
 
 

@@ -116,9 +116,10 @@ def default_reward(scenario: str) -> DensityReward:
 
 def check_reward_fits(model: DensityReward, scenario: str, where: str) -> str:
     """The feature map the teacher of ``scenario`` evaluates ``model`` with (the model's own,
-    else the scenario's default), after checking that the model fits it: a reward on the
+    else the scenario's default), after checking that the model fits it: for a scenario of a
+    known family — a built-in one, or a variant with a built-in ``base`` — a reward on the
     static study's (x, y) plane cannot score an elevator rollout, nor an elevator reward a
-    static one, and the model's width must be the feature map's. Raises :class:`DataError`
+    static one; and the model's width must be its feature map's. Raises :class:`DataError`
     naming ``where`` (the model file)."""
     own = model.info_.get("features")
     wanted = default_features(scenario)
@@ -128,7 +129,7 @@ def check_reward_fits(model: DensityReward, scenario: str, where: str) -> str:
         raise DataError(
             expect(f"reward model {where}", f"features of one of {FEATURE_MAPS}", name, fix)
         )
-    if (name == "xy") != (wanted == "xy"):
+    if _known_family(scenario) and (name == "xy") != (wanted == "xy"):
         fitted = "the static study's (x, y) position" if name == "xy" else f"{name} (elevator)"
         needed = "the (x, y) position" if wanted == "xy" else "the observation and command"
         raise DataError(
@@ -145,6 +146,16 @@ def check_reward_fits(model: DensityReward, scenario: str, where: str) -> str:
             )
         )
     return name
+
+
+def _known_family(scenario: str) -> bool:
+    """Whether ``scenario`` is a static study or an elevator by its base's shipped demos (a
+    variant registered without a base is a world of its own: its reward is the caller's)."""
+    try:
+        shipped_demos(scenario)
+    except DataError:
+        return False
+    return True
 
 
 def default_features(scenario: str) -> str:
