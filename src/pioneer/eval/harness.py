@@ -44,12 +44,18 @@ from pioneer.eval.manifest import (
     read_manifest,
     write_manifest,
 )
+from pioneer.eval.records import (
+    append_record,
+    check_seed_set,
+    key_of,
+    parse_records,
+    read_records,
+)
 from pioneer.interrupt import deferred, kept
 from pioneer.io import (
     check_name,
     check_regular_target,
     file_record,
-    naming_path,
     output_dir_kind,
     run_lock,
     to_json,
@@ -230,133 +236,6 @@ def run_task(task: Task) -> dict[str, Any]:
     if task.made_by:
         d["made_by"] = json.loads(task.made_by)
     return d
-
-
-# ------------------------------------------------------------------------------ records file
-def _key_of(rec: Mapping[str, Any]) -> tuple[str, str, int, int]:
-    return (str(rec["scenario"]), str(rec["policy"]), int(rec["seed"]), int(rec["trial"]))
-
-
-def _parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
-    """``(records, the file's complete lines, duplicates dropped)``, reading only; the last
-    line without a newline is left out of both."""
-    text = p.read_text() if p.exists() else ""
-    lines = text.split("\n")
-    whole = lines[:-1]
-    out: list[dict[str, Any]] = []
-    seen: set[tuple[str, str, int, int]] = set()
-    duplicates = 0
-    for i, line in enumerate(whole, start=1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line)
-        except json.JSONDecodeError as exc:
-            raise DataError(
-                expect(
-                    f"{p}: line {i}",
-                    "one JSON record",
-                    line[:60],
-                    "delete or repair that line, then resume",
-                )
-            ) from exc
-        if not isinstance(rec, dict):
-            raise DataError(
-                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
-            )
-        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
-        if missing:
-            raise DataError(
-                expect(
-                    f"{p}: line {i}",
-                    "fields scenario/policy/seed/trial/event",
-                    sorted(missing),
-                    "delete that line",
-                )
-            )
-        try:
-            key = _key_of(rec)
-        except (TypeError, ValueError) as exc:
-            raise DataError(
-                expect(f"{p}: line {i}", "integer seed and trial", line[:60], "delete that line")
-            ) from exc
-        if key in seen:
-            duplicates += 1
-            continue
-        seen.add(key)
-        out.append(rec)
-    return out, whole, duplicates
-
-
-def read_records(path: str | Path) -> list[dict[str, Any]]:
-    """All records of an ``episodes.jsonl``, each episode (scenario, policy, seed, trial) once;
-    a malformed line raises :class:`DataError`.
-
-    A repeated episode (a line duplicated by hand, or by two runs that once wrote to one
-    folder) counts once — the first record — with one warning on stderr saying how many were
-    ignored. A last line without a newline (a write cut by a crash) is dropped with a warning
-    on stderr, since its episode will simply be run again.
-    """
-    import sys
-
-    p = Path(path)
-    records, whole, duplicates = _parse_records(p)
-    if duplicates:
-        print(
-            f"pioneer: warning: {p}: {duplicates} repeated episode record(s) ignored (each "
-            "scenario, policy, seed and trial counts once: the first)",
-            file=sys.stderr,
-        )
-    if _torn(p):
-        print(
-            f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
-            file=sys.stderr,
-        )
-        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
-            fh.write("".join(line + "\n" for line in whole))
-    return records
-
-
-def _torn(p: Path) -> bool:
-    """Whether the file ends in a line without its newline."""
-    if not p.exists():
-        return False
-    with open(p, "rb") as fh:
-        fh.seek(0, os.SEEK_END)
-        if fh.tell() == 0:
-            return False
-        fh.seek(-1, os.SEEK_END)
-        return fh.read(1) != b"\n"
-
-
-def _append(fh: Any, rec: dict[str, Any]) -> None:
-    """Append one whole record line; if the disk is full, cut the torn line off again so the
-    file resumes cleanly, and name the file in the error."""
-    line = to_json(rec) + "\n"
-    with naming_path(fh.name):
-        pos = fh.tell()
-        try:
-            fh.write(line)
-            fh.flush()
-            os.fsync(fh.fileno())
-        except OSError:
-            with contextlib.suppress(OSError):
-                fh.truncate(pos)
-            raise
-
-
-def _check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: str) -> None:
-    """A folder holds episodes of one seed set (records before seed sets: evaluation)."""
-    found = sorted({str(r.get("seed_set", "evaluation")) for r in records})
-    if found and found != [seed_set]:
-        raise ConfigError(
-            expect(
-                f"{path}: records of the {seed_set} seed set",
-                f"only {seed_set} episodes in one folder",
-                f"{'/'.join(found)} episodes",
-                "evaluate into another --out",
-            )
-        )
 
 
 # ------------------------------------------------------------------------------ driver
@@ -548,7 +427,7 @@ def _check_folder(
 ) -> None:
     """Everything a resume must agree with in ``out``: the seed set of its records, the
     scenarios' definitions and what made its rows (reads only)."""
-    _check_seed_set(out / EPISODES_FILE, records, seed_set)
+    check_seed_set(out / EPISODES_FILE, records, seed_set)
     _pinned_scenarios(out, scenarios)
     check_made_by(out, made, read_manifest(out), records)
 
@@ -614,12 +493,12 @@ def evaluate(
     _check_shipped_parts(scenarios, policies)
     out = output_dir_kind(out_dir)  # a file there is refused; nothing is created yet
     path = out / EPISODES_FILE
-    records: list[dict[str, Any]] = [] if overwrite else _parse_records(path)[0]
+    records: list[dict[str, Any]] = [] if overwrite else parse_records(path)[0]
     if not overwrite:  # a folder that cannot be resumed is refused before any policy is built
-        _check_seed_set(path, records, seed_set)
+        check_seed_set(path, records, seed_set)
         _pinned_scenarios(out, scenarios)
     every = _tasks(scenarios, policies, seeds, trials, seed_set)
-    total = len({_key_of(r) for r in records} | {t.key for t in every})
+    total = len({key_of(r) for r in records} | {t.key for t in every})
     pairs = list(dict.fromkeys((t.scenario, t.policy) for t in every))
     todo: list[Task] = []  # filled under the folder's lock, once every policy is built
     n_workers = worker_count(workers)
@@ -638,7 +517,7 @@ def evaluate(
             _check_folder(out, scenarios, seed_set, made, records)
             _record_scenarios(out, scenarios)
             write_manifest(out, read_manifest(out), made)
-            done = {_key_of(r) for r in records}
+            done = {key_of(r) for r in records}
             made_json = {pair: to_json(m) for pair, m in made.items()}
             todo.extend(
                 dataclasses.replace(t, made_by=made_json[t.scenario, t.policy.row])
@@ -654,7 +533,7 @@ def evaluate(
             ):
                 for rec in stream:
                     with deferred():  # a record is written whole and counted
-                        _append(fh, rec)
+                        append_record(fh, rec)
                         records.append(rec)
                     if on_record is not None:
                         on_record(rec)
