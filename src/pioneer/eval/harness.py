@@ -70,7 +70,14 @@ __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "ru
 EPISODES_FILE = "episodes.jsonl"
 SCENARIOS_FILE = "scenarios.json"
 # What --overwrite deletes: the run's records and what describes them (the summaries too).
-RUN_FILES = (EPISODES_FILE, MANIFEST_FILE, SCENARIOS_FILE, "summary.json", "summary.md")
+RUN_FILES = (
+    EPISODES_FILE,
+    MANIFEST_FILE,
+    SCENARIOS_FILE,
+    "summary.json",
+    "summary.md",
+    "summary.csv",
+)
 
 
 @dataclasses.dataclass(frozen=True)
