@@ -54,7 +54,7 @@ def _file(tmp_path, name: str) -> str:
 def test_a_scenario_name_that_leaves_its_folder_is_refused_and_draws_nothing(
     tmp_path, capsys, scenario_registry
 ):
-    """Problem 3: ``scenarios --png-dir`` wrote ``../../evil.png`` two folders up."""
+    """``scenarios --png-dir`` wrote ``../../evil.png`` two folders up."""
     work = tmp_path / "a" / "b"
     work.mkdir(parents=True)
     before = file_tree(tmp_path)

@@ -99,8 +99,9 @@ def test_a_scenario_file_is_recorded_with_its_hash(tmp_path, scenario_registry):
     ids=["parameter", "policy", "checkpoint"],
 )
 def test_a_row_made_otherwise_is_refused_not_resumed(tmp_path, capsys, first, second, key):
-    """Problem 1: the same --out and row label, another parameter or checkpoint: one line
-    naming the first difference and the fix, nothing written; --overwrite starts over."""
+    """Stale results reported as new: the same --out and row label with another parameter or
+    checkpoint ran 0 episodes and reported the old records. Now: one line naming the first
+    difference and the fix, nothing written; --overwrite starts over."""
     out = tmp_path / "ev"
     assert main(_eval(out, first)) == 0
     before = file_tree(tmp_path)
@@ -167,7 +168,7 @@ def test_first_difference_names_the_first_changed_key_in_order():
 
 
 def test_a_folder_held_by_a_running_writer_is_refused(tmp_path, capsys):
-    """Problem 2, deterministically: a lock held by a live process (here: a sleeping child)."""
+    """Two writers, deterministically: a lock held by a live process (a sleeping child)."""
     out = tmp_path / "ev"
     out.mkdir()
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
@@ -208,7 +209,7 @@ def test_run_lock_is_released_on_an_exception_and_refuses_a_second_holder(tmp_pa
 
 
 def test_two_runs_started_at_once_write_each_episode_once(tmp_path):
-    """Problem 2, as the battery ran it: two identical runs into one folder at once. Either the
+    """Two writers as they happen: two identical runs into one folder at once. Either the
     second is refused by the lock (one line) or, if the first was already done, it resumes
     with nothing to do; the records hold every episode once either way."""
     out = tmp_path / "ev"

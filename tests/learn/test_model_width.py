@@ -63,7 +63,7 @@ def test_an_onnx_graph_of_another_width_is_refused_at_load(models):
     ids=["run", "eval"],
 )
 def test_a_wrong_width_onnx_is_one_line_before_any_output(models, tmp_path, capsys, argv):
-    """Problem 4: it loaded, then failed on the first decision with onnxruntime's traceback."""
+    """It loaded, then failed on the first decision with onnxruntime's 40-line traceback."""
     argv = [
         a.replace("MODEL", str(models["onnx"])).replace("OUT", str(tmp_path / "ev")) for a in argv
     ]
