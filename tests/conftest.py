@@ -36,6 +36,7 @@ def scenario_registry(monkeypatch: pytest.MonkeyPatch) -> object:
 
     monkeypatch.setattr(sc, "_REGISTRY", dict(sc._REGISTRY))
     monkeypatch.setattr(sc, "_BASES", dict(sc._BASES))
+    monkeypatch.setattr(sc, "_SOURCES", dict(sc._SOURCES))
     monkeypatch.setattr(sc, "_ENV_LOADED", "")
     monkeypatch.setenv(sc.SCENARIOS_ENV, "")
     return sc

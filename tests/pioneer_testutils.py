@@ -27,8 +27,10 @@ __all__ = [
     "assert_house_message",
     "concat_states",
     "descendants",
+    "file_tree",
     "interrupted_line",
     "make_state",
+    "one_error_line",
     "open_world",
     "room_world",
     "sector_minima",
@@ -36,6 +38,7 @@ __all__ = [
     "still_running",
     "stop_cli",
     "wall_distances",
+    "wrong_width_onnx",
 ]
 
 
@@ -160,6 +163,53 @@ def assert_house_message(msg: str, *needles: str) -> None:
         assert word in msg, f"{word!r} missing from error message: {msg}"
     for needle in needles:
         assert needle in msg, f"{needle!r} missing from error message: {msg}"
+
+
+def one_error_line(err: str, code: int, *needles: str) -> str:
+    """Exit code 2 and stderr ending in exactly one ``pioneer: error:`` line (progress bars of
+    work done before may precede it), no traceback, holding every needle; returns the line."""
+    assert code == 2, err[-2000:]
+    lines = err.strip().splitlines()
+    errors = [line for line in lines if line.startswith("pioneer: error: ")]
+    assert len(errors) == 1 and lines[-1] == errors[0] and "Traceback" not in err, err[-2000:]
+    for needle in needles:
+        assert needle in errors[0], (needle, errors[0])
+    return errors[0]
+
+
+def file_tree(root: Path) -> dict[str, tuple[int, bytes | None]]:
+    """Every entry under ``root`` (hidden ones too): its type bits and, for a regular file,
+    its bytes — to assert that a refused command left the file system as it found it."""
+    import stat
+
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in [*dirnames, *filenames]:
+            p = Path(dirpath) / name
+            mode = p.lstat().st_mode
+            out[str(p.relative_to(root))] = (
+                stat.S_IFMT(mode),
+                p.read_bytes() if stat.S_ISREG(mode) else None,
+            )
+    return out
+
+
+def wrong_width_onnx(path: Path, width: int = 28) -> Path:
+    """An exported MDN student whose graph takes ``width``-D observations while its export
+    metadata claims the 29-D observation (as a hand-edited or foreign file might)."""
+    import json
+
+    import onnx
+
+    from pioneer.learn import MDN, StudentConfig, export_onnx
+
+    export_onnx(MDN(StudentConfig(obs_dim=width, hidden=(8, 8), n_components=2), seed=0), path)
+    model = onnx.load(str(path))
+    for prop in model.metadata_props:
+        if prop.key == "config":
+            prop.value = json.dumps({**json.loads(prop.value), "obs_dim": 29})
+    onnx.save(model, str(path))
+    return path
 
 
 def angle_diff(a: float, b: float) -> float:

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import contextlib
+import datetime
+import hashlib
 import json
 import math
 import os
 import re
+import socket
 import stat
 import tempfile
+import time
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -17,16 +21,22 @@ from typing import Any
 
 import numpy as np
 
-from pioneer.errors import DataError, expect
+from pioneer.errors import ConfigError, DataError, expect
 
 __all__ = [
+    "LOCK_FILE",
     "atomic_path",
+    "check_name",
     "check_regular_target",
+    "file_record",
+    "file_sha256",
+    "inside",
     "load_npz",
     "naming_path",
     "output_dir",
     "output_dir_kind",
     "remove_partial_writes",
+    "run_lock",
     "to_json",
     "write_text_atomic",
 ]
@@ -134,17 +144,89 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
 
 def load_npz(path: str | os.PathLike[str], what: str, fix: str) -> dict[str, Any]:
     """All arrays of an ``.npz`` (``allow_pickle=False``); a missing, truncated or corrupt file
-    raises one :class:`DataError` naming ``what`` and the ``fix``."""
+    raises one :class:`DataError` naming ``what`` and the ``fix``. A file that is no ``.npz``
+    archive at all is reported as such (and a safetensors checkpoint by name), never with
+    numpy's hint to load it unsafely."""
     p = Path(path)
     if not p.is_file():
         raise DataError(expect(what, "an existing .npz file", str(p), "check the path"))
+    if not zipfile.is_zipfile(p):
+        raise DataError(expect(f"{what} {p}", "an .npz archive", _file_kind(p), fix))
     try:
         with np.load(p, allow_pickle=False) as f:
             return {k: f[k] for k in f.files}
     except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as exc:
+        # numpy refuses object arrays with a hint to allow pickles: PioneeR never does.
+        why = "object arrays (pickled data, never loaded)" if "pickle" in str(exc) else str(exc)
         raise DataError(
-            expect(f"{what} {p}", "a readable .npz", f"unreadable ({exc})", fix)
+            expect(f"{what} {p}", "a readable .npz archive", f"unreadable: {why}", fix)
         ) from exc
+
+
+def _file_kind(p: Path) -> str:
+    """What a file that is no zip archive looks like: a safetensors file (8 bytes of header
+    length, little-endian, then a JSON object), empty, or neither."""
+    with open(p, "rb") as fh:
+        head = fh.read(9)
+    if not head:
+        return "an empty file"
+    if len(head) == 9 and head[8:9] == b"{" and 2 <= int.from_bytes(head[:8], "little") < 2**27:
+        return "a safetensors file (a network checkpoint), not an .npz archive"
+    return "not an .npz archive"
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 of a file's bytes, as hex (read in chunks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def file_record(path: str | os.PathLike[str]) -> dict[str, str]:
+    """``{"path", "sha256"}`` of a file a run loaded: what it was, not only where."""
+    return {"path": os.fspath(path), "sha256": file_sha256(path)}
+
+
+# Names that become file names (scenarios, layout prefixes, row labels): no separator, no
+# leading dot (so neither "." nor ".."), nothing a shell or a file system treats specially.
+_SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+def check_name(what: str, name: object) -> str:
+    """``name`` if it is a safe name — letters, digits, ``-``, ``_`` and ``.``, not starting
+    with a dot — else :class:`ConfigError` naming ``what``. Such a name, used as a file name,
+    stays in its folder."""
+    if not isinstance(name, str) or not _SAFE_NAME.fullmatch(name):
+        raise ConfigError(
+            expect(
+                what,
+                "a name of letters, digits, '-', '_' and '.' (not starting with '.')",
+                name,
+                "rename it (no '/', no spaces, no leading dot)",
+            )
+        )
+    return name
+
+
+def inside(folder: str | os.PathLike[str], name: str) -> Path:
+    """``folder / name``, refused with :class:`DataError` unless it stays inside ``folder``:
+    ``name`` is relative and, once ``..`` and ``.`` are resolved, names something below the
+    folder. (Resolved by name, not by following symbolic links: a link the user placed in the
+    folder leads where they meant it to.)"""
+    base = Path(folder)
+    rel = os.path.normpath(name) if name else "."
+    if os.path.isabs(name) or rel == "." or rel == ".." or rel.startswith(".." + os.sep):
+        raise DataError(
+            expect(
+                f"output {name!r}",
+                f"a path inside {base}",
+                os.fspath(base / name),
+                "use a plain name (no '..', no absolute path)",
+            )
+        )
+    return base / rel
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
@@ -172,6 +254,106 @@ def to_json(obj: Any, **kwargs: Any) -> str:
     """``json.dumps`` for everything PioneeR writes or prints: strict JSON, so a NaN or an
     infinity (an undefined mean, an AUROC without negatives) is written as ``null``."""
     return json.dumps(_finite(obj), allow_nan=False, **kwargs)
+
+
+LOCK_FILE = ".lock"
+_STALE_UNREADABLE_S = 10.0  # a lock file still empty after this long was left by a crash
+
+
+@contextlib.contextmanager
+def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
+    """Hold ``folder``'s lock (creating the folder) for the block: one writer per run folder.
+
+    The lock is the file ``folder/.lock``, created exclusively (``O_CREAT | O_EXCL``) with
+    ``{"pid", "host", "started"}``; a second writer is refused with :class:`ConfigError`
+    naming the holder. A lock left by a process that no longer runs on this host (killed with
+    SIGKILL, the machine rebooted) is stale: it is replaced. The block's end — also by an
+    exception or a signal's :class:`~pioneer.interrupt.Interrupted` — removes the lock.
+    """
+    out = output_dir(folder)
+    lock = out / LOCK_FILE
+    mine = {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+    with naming_path(lock):
+        _acquire(lock, mine)
+    try:
+        yield out
+    finally:
+        with contextlib.suppress(OSError):
+            if _read_lock(lock) == mine:  # never remove another writer's lock
+                lock.unlink()
+
+
+def _acquire(lock: Path, mine: dict[str, Any]) -> None:
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            holder = _read_lock(lock)
+            if _stale(lock, holder):
+                with contextlib.suppress(FileNotFoundError):
+                    lock.unlink()
+                continue
+            raise ConfigError(_held_line(lock, holder)) from None
+        with os.fdopen(fd, "w") as fh:
+            fh.write(json.dumps(mine) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        return
+    raise ConfigError(_held_line(lock, _read_lock(lock)))
+
+
+def _read_lock(lock: Path) -> dict[str, Any] | None:
+    """The holder written in a lock file; None if it is unreadable (empty: being written)."""
+    try:
+        holder = json.loads(lock.read_text())
+    except (OSError, ValueError):
+        return None
+    return holder if isinstance(holder, dict) else None
+
+
+def _stale(lock: Path, holder: dict[str, Any] | None) -> bool:
+    """A lock whose process is gone from this host, or that stayed unreadable too long."""
+    if holder is None:
+        try:
+            return time.time() - lock.stat().st_mtime > _STALE_UNREADABLE_S
+        except FileNotFoundError:
+            return True
+    pid = holder.get("pid")
+    if holder.get("host") != socket.gethostname() or not isinstance(pid, int):
+        return False  # another machine's process (a shared folder): cannot tell
+    return not _alive(pid)
+
+
+def _alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    with contextlib.suppress(OSError, IndexError):  # a zombie has finished (Linux: /proc)
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    return True
+
+
+def _held_line(lock: Path, holder: dict[str, Any] | None) -> str:
+    who = (
+        f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')}"
+        if holder
+        else "a run starting"
+    )
+    return expect(
+        f"run folder {lock.parent}",
+        "one writer at a time",
+        f"another run writing to it ({who})",
+        f"wait for it to end or use another --out; if no run uses the folder, delete {lock}",
+    )
 
 
 # atomic_path's temporary file: "." + the target's name + "." + mkstemp's 8 characters + suffix

@@ -263,10 +263,15 @@ def test_eval_policy_parameters_reach_the_workers(tmp_path):
     for r in recs:
         by_row.setdefault(r["policy"], []).append(r)
     assert sorted(by_row) == ["mine", "student-mlp"]
-    strip = ("policy", "wall_time_s", "decision_ms")
+    strip = ("policy", "wall_time_s", "decision_ms", "made_by")
     same = [{k: v for k, v in r.items() if k not in strip} for r in by_row["mine"]]
     base = [{k: v for k, v in r.items() if k not in strip} for r in by_row["student-mlp"]]
     assert sorted(same, key=str) == sorted(base, key=str)  # the same checkpoint
+    files = {
+        row: [r["made_by"]["files"]["checkpoint"]["sha256"] for r in rs]
+        for row, rs in by_row.items()
+    }
+    assert files["mine"] == files["student-mlp"]  # the records say so too
 
 
 @pytest.mark.parametrize(

@@ -90,9 +90,9 @@ def test_reward_fit_options(demos_file, tmp_path, capsys):
     # positives only, scored on the full dataset
     pos = tmp_path / "pos.npz"
     argv = ["reward", "fit", "--demos", str(demos_file), "--out", str(pos), "--min-gamma", "0"]
-    assert main(argv) == 2  # one-sided: refused unless allowed
+    assert main(argv) == 2  # one-sided by the flag: refused unless allowed, blaming the flag
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no negatives (30 positive, 0 negative)" in err[0]
+    assert len(err) == 1 and "--min-gamma" in err[0] and "30 positive, 0 negative" in err[0]
     assert "--allow-one-sided" in err[0] and not pos.exists()
     assert main([*argv, "--allow-one-sided"]) == 0
     assert "warning" in capsys.readouterr().err

@@ -31,7 +31,9 @@ def test_every_name_builds_in_a_fresh_interpreter_without_prior_imports() -> Non
 
 def test_part_checks_refuse_a_missing_shipped_part_without_building() -> None:
     registry.check_parts("teacher", "hr-rl", {})
-    registry.check_parts("teacher", "no-such-demos", {"reward": "r.npz"})  # own reward: no demos
+    # an own reward: no shipped demos looked up, but the file itself is loaded and checked
+    with pytest.raises(DataError, match="reward model: expected an existing"):
+        registry.check_parts("teacher", "no-such-demos", {"reward": "r.npz"})
     with pytest.raises(DataError, match="shipped student"):
         registry.check_parts("student-mlp", "static", {})
 

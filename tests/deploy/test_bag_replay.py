@@ -19,7 +19,12 @@ from pioneer.deploy.bag import CSV_COLUMNS, goal_in_robot_frame
 from pioneer.errors import ConfigError, DataError
 from pioneer.learn import MDN, StudentConfig, export_onnx, save_student
 from pioneer.learn.export import MDN_OUTPUTS, PARITY_TOL
-from pioneer_testutils import ROBOT_SIDE_PRELUDE, assert_house_message
+from pioneer_testutils import (
+    ROBOT_SIDE_PRELUDE,
+    assert_house_message,
+    one_error_line,
+    wrong_width_onnx,
+)
 
 pytest.importorskip("rosbags")
 
@@ -381,3 +386,15 @@ def test_cli_replay_runs_with_torch_numba_and_simulator_blocked(student, scans, 
     assert json.loads(lines[-2])["rows"] == 3  # the CLI's summary
     assert json.loads(lines[-1]) == {"rc": 0, "heavy": []}
     assert len(read_csv(out)[1]) == 3
+
+
+def test_cli_replay_refuses_a_model_of_another_width_before_reading(scans, tmp_path, capsys):
+    """An ONNX graph 28 wide that claims the 29-D observation in its metadata: one line at load,
+    not onnxruntime's traceback at the first scan, and no CSV."""
+    bag = write_scan_bag(tmp_path / "run.bag", "ros1", scans)
+    model = wrong_width_onnx(tmp_path / "w28.onnx")
+    out = tmp_path / "cmds.csv"
+    code = main(["replay", "--bag", str(bag), "--model", str(model), "--out", str(out),
+                 "--goal", "2", "1"])  # fmt: skip
+    one_error_line(capsys.readouterr().err, code, "input 'obs'", "28")
+    assert not out.exists()

@@ -4,6 +4,7 @@ same records from serial, parallel and Ray runs."""
 
 from __future__ import annotations
 
+import functools
 import json
 import shlex
 import signal
@@ -498,11 +499,11 @@ def test_a_scenario_redefined_under_the_same_name_is_refused_on_resume(tmp_path,
         ('sfm:name="x",label=3', "sfm", {"name": "x"}, "3"),
         ("dwa:v=[0.1]", "dwa", {"v": (0.1,)}, ""),  # a list becomes a (hashable) tuple
         ("dwa:v=[0.1, 0.2],w=1", "dwa", {"v": (0.1, 0.2), "w": 1}, ""),  # commas in a list
-        (  # commas (and an escaped quote) inside a quoted text
-            'student-mlp:checkpoint="runs/a,b/\\"c\\".safetensors",label="x,y"',
+        (  # commas (and an escaped quote) inside a quoted text; a quoted label
+            'student-mlp:checkpoint="runs/a,b/\\"c\\".safetensors",label="x.y"',
             "student-mlp",
             {"checkpoint": 'runs/a,b/"c".safetensors'},
-            "x,y",
+            "x.y",
         ),
     ],
 )
@@ -551,13 +552,21 @@ def test_a_missing_shipped_part_fails_before_any_episode(tmp_path, scenario_regi
         evaluate(["lobby-x"], [GOAL, spec], 1, 1, tmp_path / "ev", workers=1, progress=False)
     assert_house_message(str(err.value), needle, "lobby-x")
     assert not (tmp_path / "ev" / EPISODES_FILE).exists()
-    # with its own parts (a checkpoint / reward / weights parameter) nothing is looked up
+    # with its own parts (a checkpoint / reward / weights parameter) nothing shipped is looked
+    # up; a given reward model is loaded and checked against the scenario instead
     own = {"student-mdn": "checkpoint", "student-shield": "checkpoint", "teacher": "reward"}
     if spec.name in own:
         kw = {own[spec.name]: "x", **({"reward": "x"} if spec.name == "student-shield" else {})}
         from pioneer.eval.harness import _check_shipped_parts
 
-        _check_shipped_parts(["lobby-x"], [PolicySpec.make(spec.name, **kw)])
+        check = functools.partial(
+            _check_shipped_parts, ["lobby-x"], [PolicySpec.make(spec.name, **kw)]
+        )
+        if "reward" in kw:
+            with pytest.raises(DataError, match=r"reward model: expected an existing \.npz"):
+                check()
+        else:
+            check()
 
 
 @pytest.mark.slow

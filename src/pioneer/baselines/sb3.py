@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS as PPO_CURVE_COLUMNS
 from pioneer.errors import ConfigError, DataError, expect
-from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.registration import ENV_IDS, register_envs
 
 __all__ = [
@@ -135,7 +135,6 @@ def train_sb3_ppo(
     summary written to ``train.json``. A folder that holds a finished or partial run is
     refused (SB3's state cannot be resumed without pickles)."""
     import gymnasium as gym
-    import stable_baselines3
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -143,18 +142,43 @@ def train_sb3_ppo(
     for name, value in (("steps", steps), ("n_envs", n_envs)):
         if value < 1:
             raise ConfigError(expect(f"sb3-ppo {name}", "an integer >= 1", value, "raise it"))
-    out = Path(out_dir)
-    if (out / "curve.csv").exists() or (out / "policy.safetensors").exists():
-        raise ConfigError(
-            expect("--out", "a folder without an SB3 run", str(out), "use a new --out")
-        )
-    output_dir(out)
+    out = output_dir_kind(out_dir)
+    _check_fresh(out)
     register_envs()
     env_id, kwargs = env_id_for(scenario)
     gym.spec(env_id)  # an unknown id fails here, before any work
     torch.set_num_threads(1)
     venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=kwargs)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0)
+    with run_lock(out):  # created only now: a refused run leaves nothing behind
+        _check_fresh(out)
+        return _learn(
+            model, venv, out, (scenario, env_id), (steps, n_envs, seed), progress, command
+        )
+
+
+def _check_fresh(out: Path) -> None:
+    if (out / "curve.csv").exists() or (out / "policy.safetensors").exists():
+        raise ConfigError(
+            expect("--out", "a folder without an SB3 run", str(out), "use a new --out")
+        )
+
+
+def _learn(
+    model: Any,
+    venv: Any,
+    out: Path,
+    names: tuple[str, str],
+    counts: tuple[int, int, int],
+    progress: bool,
+    command: str,
+) -> dict[str, Any]:
+    """Train ``model`` for ``counts`` = (steps, environments, seed) and write the outputs into
+    ``out``; returns the summary."""
+    import stable_baselines3
+
+    scenario, env_id = names
+    steps, n_envs, seed = counts
     (out / "curve.csv").write_text(",".join(CURVE_COLUMNS) + "\n", encoding="utf-8")
     callback = _make_callback(out, steps, progress)
     t0 = time.perf_counter()
@@ -237,6 +261,14 @@ class Sb3Policy:
         return np.asarray(action, dtype=np.float64).reshape(2)
 
 
+def _obs_dim(scenario: str | None) -> int:
+    """The width of the observation the policy is given (its scenario's LiDAR's)."""
+    from pioneer.sim.lidar import OBS_DIM
+    from pioneer.sim.scenarios import get_scenario
+
+    return get_scenario(scenario).sim.lidar.obs_dim if scenario is not None else OBS_DIM
+
+
 def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-ppo") -> Sb3Policy:
     """Policy factory: the SB3 policy in ``weights`` (a ``policy.safetensors`` written by
     ``pioneer train sb3-ppo``; ``{scenario}`` is filled in)."""
@@ -267,6 +299,9 @@ def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-
         )
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise DataError(expect(f"{p}: config", "an SB3 policy config", f"{exc}", fix)) from exc
+    wanted = (_obs_dim(scenario),)
+    if spaces[0].shape != wanted:
+        raise DataError(expect(f"{p}: observation_space", f"shape {wanted}", spaces[0].shape, fix))
     load_checked(policy, arrays, p, f"SB3 MlpPolicy {cfg['net_arch']}", fix)
     policy.set_training_mode(False)
     torch.set_num_threads(1)

@@ -26,7 +26,7 @@ from typing import Annotated, Any, NoReturn, cast
 import tyro
 
 from pioneer.cli._common import Command, check_outputs
-from pioneer.cli._parse import parse, refuse
+from pioneer.cli._parse import one_line, parse, refuse
 from pioneer.config import check_option_bounds
 from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
 from pioneer.interrupt import Interrupted, handle_signals
@@ -194,9 +194,16 @@ def _register_scenario_files(files: Sequence[str]) -> None:
         from pioneer.sim.scenarios import SCENARIOS_ENV, load_env_scenarios
 
         paths = [str(Path(f).resolve()) for f in files]
-        old = os.environ.get(SCENARIOS_ENV, "")
+        old = os.environ.get(SCENARIOS_ENV)
         os.environ[SCENARIOS_ENV] = os.pathsep.join([*filter(None, [old]), *paths])
-        load_env_scenarios()
+        try:
+            load_env_scenarios()
+        except BaseException:  # a refused file is not kept for what runs next
+            if old is None:
+                del os.environ[SCENARIOS_ENV]
+            else:
+                os.environ[SCENARIOS_ENV] = old
+            raise
 
 
 @handle_signals()
@@ -233,6 +240,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _refused(line: str) -> int:
-    """The one error path: one line on stderr, exit code 2."""
-    print(f"pioneer: error: {line}", file=sys.stderr)
+    """The one error path: one line on stderr (line breaks in a message folded), exit code 2."""
+    print(f"pioneer: error: {one_line(line)}", file=sys.stderr)
     return 2

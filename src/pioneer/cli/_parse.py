@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover - depends on the installed tyro
 if not hasattr(tyro_errors, "on_parse_error"):  # pragma: no cover - as above
     tyro_errors = None  # type: ignore[assignment]
 
-__all__ = ["parse", "refuse"]
+__all__ = ["one_line", "parse", "refuse"]
 
 T = TypeVar("T")
 
@@ -40,9 +40,15 @@ class _Refused(Exception):
 
 
 def refuse(message: str) -> NoReturn:
-    """Print ``pioneer: error: message`` (one line) and exit 2, as for any bad command line."""
-    print(f"pioneer: error: {message}", file=sys.stderr)
+    """Print ``pioneer: error: message`` (one line: any line breaks in it are folded) and exit
+    2, as for any bad command line."""
+    print(f"pioneer: error: {one_line(message)}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def one_line(message: str) -> str:
+    """``message`` with its line breaks and runs of blanks folded into single spaces."""
+    return " ".join(message.split())
 
 
 def parse(
@@ -134,9 +140,21 @@ def _describe(event: Any, cls: type, args: Sequence[str], prog: str) -> str | No
         if event.argument is None:  # the options refused themselves: the message is ours
             return str(event.message)
         name, usage = _usage(event.argument)
-        wanted = f"{event.argument.lowered.metavar or 'a valid value'} ({event.message})"
+        reason = _reason(str(event.message))
+        wanted = f"{event.argument.lowered.metavar or 'a valid value'} ({reason})"
         return expect(f"{prog} {name}", wanted, _given(args, name), f"give {usage}")
     return None
+
+
+def _reason(message: str) -> str:
+    """tyro's reason a value could not be made, as one line: for an optional option (``int |
+    None``) it lists every type's error — keep the real type's, not ``None``'s."""
+    lines = [line.strip() for line in message.splitlines() if line.strip()]
+    errors = [line[2:] for line in lines if line.startswith("- ")]
+    typed = [e for e in errors if not e.startswith("<class 'NoneType'>")]
+    if typed:
+        return one_line(typed[-1].split(">: ", 1)[-1])
+    return one_line(message)
 
 
 def _usage(arg: Any) -> tuple[str, str]:

@@ -87,6 +87,10 @@ class Run:
         from pioneer.eval.episode import run_episode
         from pioneer.sim.scenarios import get_scenario
 
+        if self.lidar and not self.gif:
+            raise ConfigError(
+                expect("--lidar", "--gif FILE (it draws the rays in it)", None, "add --gif FILE")
+            )
         scenario = get_scenario(self.scenario)
         policy = self._policy(scenario.name)
         record = bool(self.gif or self.png or self.frames)
@@ -165,7 +169,10 @@ class Eval:
     backend: Literal["process", "ray"] = default(evaluate, "backend")
     """where the episodes run"""
     ray_address: Annotated[str | None, optional("ADDRESS", "start a local Ray")] = None
-    """Ray cluster address"""
+    """Ray cluster address (HOST:PORT), with --backend ray"""
+    overwrite: Flag = False
+    """delete the records, manifest and summaries in --out and start over (default: resume,
+    if the rows there were made the same way)"""
     ablation: Ablations = dataclasses.field(default_factory=Ablation)
 
     def run(self) -> int:
@@ -175,6 +182,7 @@ class Eval:
 
         require_some("--scenario", self.scenario)
         require_some("--policy", self.policy)
+        self._check_backend_flags()
         specs = self._specs()
         recs = evaluate(
             self.scenario,
@@ -186,6 +194,7 @@ class Eval:
             backend=self.backend,
             ray_address=self.ray_address,
             seed_set=self.seed_set,
+            overwrite=self.overwrite,
         )
         summary = summarize(recs)
         write_summary(self.out, summary)
@@ -196,11 +205,36 @@ class Eval:
             )
         return 0
 
+    def _check_backend_flags(self) -> None:
+        """A flag of the other backend is refused, not ignored."""
+        if self.ray_address is not None and self.backend != "ray":
+            raise ConfigError(
+                expect("--ray-address", "--backend ray", "--backend process", "add --backend ray")
+            )
+        if self.workers is not None and self.backend == "ray":
+            raise ConfigError(
+                expect(
+                    "--workers",
+                    "--backend process (Ray places the episodes on its cluster's cores)",
+                    "--backend ray",
+                    "drop --workers",
+                )
+            )
+
     def _specs(self) -> list[PolicySpec]:
         """The checked policies, the teacher ablated as asked; every row label distinct."""
         from pioneer.eval.harness import PolicySpec
 
         abl = self.ablation.kwargs()
+        if abl and not any(PolicySpec.parse(text).name == "teacher" for text in self.policy):
+            raise ConfigError(
+                expect(
+                    "--no-density/--no-goal/--no-obstacle",
+                    "a 'teacher' among the policies (the flags ablate it)",
+                    list(self.policy),
+                    "drop the flags, or add --policy teacher",
+                )
+            )
         specs = []
         for text in self.policy:
             spec = policy_spec(text)
@@ -236,10 +270,18 @@ class Reproduce:
     """processes"""
     seed_set: SeedSet = default(reproduce, "seed_set")
     """evaluation (the reported tables) or validation (to check a choice) episodes"""
+    overwrite: Flag = False
+    """delete the evaluation's records in OUT/eval and start over (default: resume)"""
 
     def run(self) -> int:
         """Reproduce, then print what was written."""
         with kept(lambda: f"the finished steps kept in {self.out}"):  # the harness names its own
-            summary = reproduce(self.profile, self.out, self.workers, seed_set=self.seed_set)
+            summary = reproduce(
+                self.profile,
+                self.out,
+                self.workers,
+                seed_set=self.seed_set,
+                overwrite=self.overwrite,
+            )
         print(to_json(summary, indent=2))
         return 0

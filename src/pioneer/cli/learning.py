@@ -26,6 +26,7 @@ from pioneer.cli._common import (
     require_some,
 )
 from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
@@ -83,6 +84,7 @@ class Distill:
 
     def run(self) -> int:
         """Run (or resume) DAgger; print where the student is."""
+        self._check_student_flags()
         cfg = DaggerConfig(
             scenario=self.scenario,
             student=self.student,
@@ -103,6 +105,17 @@ class Distill:
             f"{100 * last['success_rate']:.0f}%); curves: {res.out / 'curves.png'}"
         )
         return 0
+
+    def _check_student_flags(self) -> None:
+        """--action-mode and --nll-beta shape the MDN: with --student mlp they are refused,
+        not ignored."""
+        if self.student == "mdn":
+            return
+        for flag, name in (("--action-mode", "action_mode"), ("--nll-beta", "nll_beta")):
+            if getattr(self, name) != default(DaggerConfig, name):
+                raise ConfigError(
+                    expect(flag, "--student mdn (an MDN setting)", "--student mlp", f"drop {flag}")
+                )
 
 
 @dataclasses.dataclass(frozen=True)

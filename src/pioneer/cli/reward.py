@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
 from pioneer.cli._common import Flag, OutDir, OutFile, default, metavar, one_of, optional
 from pioneer.data import DEMOS_DIR
-from pioneer.errors import DataError, expect
+from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json
 from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import INDUCING, DensityConfig
@@ -74,9 +74,23 @@ class RewardFit:
         from pioneer.reward.features import default_feature_map, feature_map
         from pioneer.reward.select import select_length_scale
 
+        self._check_min_gamma()
         d = Dataset.load(self.demos)
         if self.min_gamma is not None:
-            d = d.filter(min_gamma=self.min_gamma)
+            kept = d.filter(min_gamma=self.min_gamma)
+            lost = kept.one_sided() is not None and d.one_sided() is None  # the flag's doing
+            if lost and (not self.allow_one_sided or len(kept) == 0):
+                raise ConfigError(
+                    expect(
+                        "--min-gamma",
+                        "a threshold that keeps positive and negative samples",
+                        f"{self.min_gamma} (keeps {kept.n_positive} positive, "
+                        f"{kept.n_negative} negative of {len(d)})",
+                        "lower it so that samples of both signs remain, drop it, or pass "
+                        "--allow-one-sided",
+                    )
+                )
+            d = kept
         lacking = d.one_sided()
         if lacking is not None:
             what = f"{self.demos}: labels"
@@ -116,6 +130,14 @@ class RewardFit:
         fitted = {"length_scale": model.length_, "scale": model.scale_, "n_train": model.n_train_}
         print(to_json({"out": self.out, **fitted, **model.info_}))
         return 0
+
+    def _check_min_gamma(self) -> None:
+        """γ lies in [−1, 1]: a threshold outside it is the flag's mistake, not the data's."""
+        g = self.min_gamma
+        if g is not None and not -1.0 <= g <= 1.0:
+            raise ConfigError(
+                expect("--min-gamma", "a number in [-1, 1] (γ's range)", g, "pick one in [-1, 1]")
+            )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,7 +20,7 @@ from pioneer.cli._common import (
 )
 from pioneer.experiments.calibration import calibrate
 from pioneer.experiments.reproduce import SCENARIOS
-from pioneer.io import output_dir
+from pioneer.io import inside, output_dir
 
 if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
@@ -67,7 +67,7 @@ class Scenarios:
         for name, cfg in progress_bar(configs.items(), desc="layouts", unit="png"):
             state = sample_state(cfg, np.random.default_rng(self.seed))
             title = f"{name} · initial state, seed {self.seed}"
-            plot_trajectory(cfg.world(), [state], out / f"{name}.png", title=title)
+            plot_trajectory(cfg.world(), [state], inside(out, f"{name}.png"), title=title)
         print(f"wrote {len(configs)} layouts to {out}")
 
 
@@ -120,10 +120,11 @@ class SampleLayouts:
 
     def run(self) -> int:
         """Draw, write the file, print a summary line."""
-        from pioneer.io import to_json, write_text_atomic
+        from pioneer.io import check_name, to_json, write_text_atomic
         from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
         from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
 
+        check_name("--prefix", self.prefix)  # the variants' names become file names
         dist = LayoutDistribution()
         variants, rejected = sample_variants(dist, self.n, self.seed, self.prefix)
         doc = {

@@ -13,6 +13,10 @@ Third-party packages add policies through the ``pioneer.policies`` entry-point g
 
 The value may also point at a :class:`PolicyEntry` (to give fixed keyword arguments, a check
 or the extra that provides it).
+
+:func:`resolve_policy` says what a policy is made of in a scenario — every parameter with the
+value it gets and the content hash of every file it loads — so that an evaluation's records
+name what made them.
 """
 
 from __future__ import annotations
@@ -22,14 +26,17 @@ import importlib
 import importlib.metadata
 import inspect
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
 from pioneer.config import check_parameters
 from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
+from pioneer.io import file_record
 
 __all__ = [
     "ENTRY_POINT_GROUP",
+    "FILE_PARAMETERS",
     "PolicyEntry",
     "build_policy",
     "check_parts",
@@ -40,16 +47,20 @@ __all__ = [
     "policy_factory",
     "policy_names",
     "register_policy",
+    "resolve_policy",
 ]
 
 ENTRY_POINT_GROUP = "pioneer.policies"
+# Parameters that name a file the factory loads ("{scenario}" in them is filled in).
+FILE_PARAMETERS = ("checkpoint", "model", "reward", "weights")
 
 
 @dataclasses.dataclass(frozen=True)
 class PolicyEntry:
     """A registered policy: its factory (``"module:attribute"`` or a callable), the keyword
-    arguments fixed for this name, an optional light check of its parts, and the pip extra
-    whose packages the factory imports."""
+    arguments fixed for this name, an optional light check of its parts, the pip extra whose
+    packages the factory imports, and an optional function naming the files it loads when a
+    path parameter is unset (:mod:`pioneer.control.parts`)."""
 
     name: str
     entry_point: str | Callable[..., Policy]
@@ -57,6 +68,7 @@ class PolicyEntry:
     check: str | None = None  # "module:function(scenario, kwargs)"
     extra: str = ""  # e.g. "learn" (torch)
     summary: str = ""
+    files: str | None = None  # "module:function(scenario, params) -> {name: Path}"
 
     def target(self) -> Callable[..., Policy]:
         """The factory itself, without the fixed keyword arguments (imports its module); its
@@ -91,15 +103,26 @@ class PolicyEntry:
 
 
 def _builtin(
-    key: str, target: str, summary: str, *, check: str | None = None, extra: str = "", **kw: Any
+    key: str,
+    target: str,
+    summary: str,
+    *,
+    check: str | None = None,
+    extra: str = "",
+    files: str | None = None,
+    **kw: Any,
 ) -> PolicyEntry:
-    return PolicyEntry(key, target, tuple(sorted(kw.items())), check, extra, summary)
+    return PolicyEntry(key, target, tuple(sorted(kw.items())), check, extra, summary, files)
 
 
 _TEACHER = "pioneer.control.teacher:make_teacher"
 _PARTS = "pioneer.data.parts"
+_OWN = "pioneer.control.parts"
+_TEACHER_PARTS = {"check": f"{_OWN}:check_teacher", "files": f"{_OWN}:teacher_files"}
+_STUDENT_PARTS = {"check": f"{_PARTS}:student", "files": f"{_OWN}:student_files"}
+_CROWDNAV_PARTS = {"check": f"{_PARTS}:crowdnav", "files": f"{_OWN}:crowdnav_files"}
 _BUILTINS = (
-    _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", check=f"{_PARTS}:teacher"),
+    _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", **_TEACHER_PARTS),
     _builtin(
         "teacher-no-density",
         _TEACHER,
@@ -111,7 +134,7 @@ _BUILTINS = (
         "teacher-no-goal",
         _TEACHER,
         "teacher without R_goal (Table II)",
-        check=f"{_PARTS}:teacher",
+        **_TEACHER_PARTS,
         goal=False,
         name="teacher-no-goal",
     ),
@@ -119,7 +142,7 @@ _BUILTINS = (
         "teacher-no-obstacle",
         _TEACHER,
         "teacher without R_obs (Table II)",
-        check=f"{_PARTS}:teacher",
+        **_TEACHER_PARTS,
         obstacle=False,
         name="teacher-no-obstacle",
     ),
@@ -131,14 +154,14 @@ _BUILTINS = (
         "crowdnav++",
         "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
         "CrowdNav++ GRU-attention policy, pure PPO (the original's recipe)",
-        check=f"{_PARTS}:crowdnav",
+        **_CROWDNAV_PARTS,
         extra="learn",
     ),
     _builtin(
         "crowdnav++-il",
         "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
         "CrowdNav++ warm-started by imitation of sfm, then PPO",
-        check=f"{_PARTS}:crowdnav",
+        **_CROWDNAV_PARTS,
         extra="learn",
         variant="il",
         name="crowdnav++-il",
@@ -153,7 +176,7 @@ _BUILTINS = (
         "student-mdn",
         "pioneer.learn.policy:make_student_policy",
         "DAgger MDN student",
-        check=f"{_PARTS}:student",
+        **_STUDENT_PARTS,
         extra="learn",
         kind="mdn",
         name="student-mdn",
@@ -162,7 +185,7 @@ _BUILTINS = (
         "student-mlp",
         "pioneer.learn.policy:make_student_policy",
         "DAgger MLP student",
-        check=f"{_PARTS}:student",
+        **_STUDENT_PARTS,
         extra="learn",
         kind="mlp",
         name="student-mlp",
@@ -171,7 +194,7 @@ _BUILTINS = (
         "student-general",
         "pioneer.learn.policy:make_student_policy",
         "one DAgger MDN student for many elevator layouts (beyond the paper)",
-        check=f"{_PARTS}:student",
+        **_STUDENT_PARTS,
         extra="learn",
         kind="mdn",
         general=True,
@@ -187,7 +210,8 @@ _BUILTINS = (
         "student-shield",
         "pioneer.learn.shield:make_shield_policy",
         "MDN student with an uncertainty shield",
-        check=f"{_PARTS}:shield",
+        check=f"{_OWN}:check_shield",
+        files=f"{_OWN}:shield_files",
         extra="learn",
     ),
 )
@@ -281,11 +305,65 @@ def check_parts(name: str, scenario: str, kwargs: Mapping[str, Any]) -> None:
 
 def build_policy(name: str, scenario: str | None = None, **kwargs: Any) -> Policy:
     """Construct ``name``, passing ``scenario`` only to factories that take it (the teacher
-    needs the scenario to pick its reward; the go-to-goal controller does not)."""
+    needs the scenario to pick its reward; the go-to-goal controller does not). With a
+    scenario, the entry's check of its parts runs first (:func:`check_parts`): a reward model
+    that does not fit the scenario is refused here, not halfway through an episode."""
     factory = policy_factory(name)
-    if scenario is not None and "scenario" in inspect.signature(factory).parameters:
-        kwargs["scenario"] = scenario
+    if scenario is not None:
+        check_parts(name, scenario, kwargs)
+        if "scenario" in inspect.signature(factory).parameters:
+            kwargs["scenario"] = scenario
     return factory(**kwargs)
+
+
+def resolve_policy(name: str, scenario: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """What policy ``name`` with ``kwargs`` is made of in ``scenario``, as plain JSON data:
+    ``{"policy": name, "params": {…}, "files": {key: {"path", "sha256"}}}`` — every parameter
+    of its factory with the value it gets (given, fixed by the entry, or its default; a path's
+    ``{scenario}`` filled in) and the content hash of every file it loads: the given paths of
+    :data:`FILE_PARAMETERS` and the shipped files the entry falls back on. Imports the factory
+    (torch for the students)."""
+    entry = policy_entry(name)
+    target = entry.target()
+    fixed = dict(entry.kwargs)
+    given = check_parameters(f"policy {name}", target, dict(kwargs), fixed)
+    params: dict[str, Any] = {
+        p.name: p.default
+        for p in inspect.signature(target).parameters.values()
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name != "scenario"
+        and p.default is not p.empty
+    }
+    params.update(fixed)
+    params.update(given)
+    files: dict[str, Path] = {}
+    for key in FILE_PARAMETERS:
+        if isinstance(params.get(key), str | Path):
+            params[key] = str(params[key]).replace("{scenario}", scenario)
+            files[key] = Path(params[key])
+    if entry.files:
+        files.update(entry._load(entry.files)(scenario, params))
+    return {
+        "policy": name,
+        "params": {k: _plain(v) for k, v in sorted(params.items())},
+        "files": {k: file_record(p) for k, p in sorted(files.items())},
+    }
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data (a config as its fields, a tuple as a list, anything else that
+    JSON cannot hold as its repr)."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return _plain(dataclasses.asdict(value))
+    return repr(value)
 
 
 def make_policy(name: str, **kwargs: Any) -> Policy:

@@ -219,10 +219,30 @@ class StudentRuntime:
                     "pass the LidarConfig the student was trained with",
                 )
             )
+        self._check_input(p, fix)
         self.outputs = [o.name for o in self.session.get_outputs()]
         self._fetch = [n for n in ("action", "aleatoric", "epistemic") if n in self.outputs]
         if "action" not in self._fetch:
             raise DataError(expect(f"{p}: outputs", "an 'action' output", self.outputs, fix))
+
+    def _check_input(self, p: Path, fix: str) -> None:
+        """The graph's input must be ``obs`` of ``(N, obs_dim)``: a graph of another width,
+        whatever its metadata says, would fail on its first decision (a named batch size
+        passes; a fixed width must be the observation's)."""
+        inputs = {i.name: list(i.shape) for i in self.session.get_inputs()}
+        shape = inputs.get("obs")
+        if shape is None:
+            raise DataError(expect(f"{p}: inputs", "one named 'obs'", sorted(inputs), fix))
+        width = shape[-1] if len(shape) == 2 else None
+        if len(shape) != 2 or (isinstance(width, int) and width != self.obs_dim):
+            raise DataError(
+                expect(
+                    f"{p}: input 'obs'",
+                    f"shape (N, {self.obs_dim}) (the {self.obs_dim}-D observation)",
+                    f"shape {tuple(shape)}",
+                    "export the student trained on this observation (pioneer export)",
+                )
+            )
 
     def decide_batch(
         self, obs: NDArray[np.floating]

@@ -12,6 +12,15 @@ local processes (default) or a Ray cluster (extra ``distributed``). ``scenarios.
 records the full config of every scenario evaluated into the folder; resuming with a
 scenario whose definition changed under the same name (an edited scenario file) is refused,
 so one table never mixes two layouts.
+
+A run folder cannot lie about what made its records. Every record carries ``made_by`` (the
+policy's resolved parameters and the content hash of every file it loaded) and
+``manifest.json`` holds the same per row and scenario (:mod:`pioneer.eval.manifest`); a run
+whose row differs from the one of the same label in the folder is refused before it writes
+anything (``overwrite=True`` deletes the folder's records and starts over). One run writes
+to a folder at a time (its lock file, :func:`pioneer.io.run_lock`), and reading the records
+counts each episode once. Every input is checked — every policy built, in the workers —
+before the folder is created: a refused run leaves the file system as it found it.
 """
 
 from __future__ import annotations
@@ -28,8 +37,29 @@ from pathlib import Path
 from typing import Any
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.eval.manifest import (
+    MANIFEST_FILE,
+    MadeBy,
+    check_made_by,
+    read_manifest,
+    write_manifest,
+)
+from pioneer.eval.records import (
+    append_record,
+    check_seed_set,
+    key_of,
+    parse_records,
+    read_records,
+)
 from pioneer.interrupt import deferred, kept
-from pioneer.io import check_regular_target, naming_path, output_dir, to_json
+from pioneer.io import (
+    check_name,
+    check_regular_target,
+    file_record,
+    output_dir_kind,
+    run_lock,
+    to_json,
+)
 from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
 from pioneer.seeds import SEED_SETS
@@ -39,6 +69,15 @@ __all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "ru
 
 EPISODES_FILE = "episodes.jsonl"
 SCENARIOS_FILE = "scenarios.json"
+# What --overwrite deletes: the run's records and what describes them (the summaries too).
+RUN_FILES = (
+    EPISODES_FILE,
+    MANIFEST_FILE,
+    SCENARIOS_FILE,
+    "summary.json",
+    "summary.md",
+    "summary.csv",
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,6 +130,8 @@ class PolicySpec:
                 )
             kwargs[key] = tuple(value) if isinstance(value, list) else value  # hashable
         label = kwargs.pop("label", "")
+        if label != "":
+            check_name(f"policy {name!r} label", str(label))
         return cls(name.strip(), tuple(sorted(kwargs.items())), str(label))
 
 
@@ -129,6 +170,7 @@ class Task:
     seed: int
     trial: int
     seed_set: str = "evaluation"  # or "validation" (pioneer.seeds.SEED_SETS)
+    made_by: str = ""  # what makes its row (JSON of made_by()), copied into its record
 
     @property
     def key(self) -> tuple[str, str, int, int]:
@@ -143,11 +185,13 @@ def episode_seed(scenario: str, seed: int, trial: int, seed_set: str = "evaluati
 
 
 # ------------------------------------------------------------------------------ worker side
-_POLICY_CACHE: dict[tuple[str, PolicySpec], Any] = {}
+# Built policies, by what they are made of: a checkpoint changed in place between two runs in
+# one process (a notebook, a Ray worker) is built again, never served from the cache.
+_POLICY_CACHE: dict[tuple[str, PolicySpec, str], Any] = {}
 
 
-def _make_policy(spec: PolicySpec, scenario: str) -> Any:
-    key = (scenario, spec)
+def _make_policy(spec: PolicySpec, scenario: str, made: str = "") -> Any:
+    key = (scenario, spec, made)
     if key not in _POLICY_CACHE:
         from pioneer.control.registry import build_policy
 
@@ -156,6 +200,19 @@ def _make_policy(spec: PolicySpec, scenario: str) -> Any:
             pol.name = spec.label
         _POLICY_CACHE[key] = pol
     return _POLICY_CACHE[key]
+
+
+def made_by(spec: PolicySpec, scenario: str) -> dict[str, Any]:
+    """What makes ``spec``'s row in ``scenario``, as JSON data: its resolved parameters and the
+    files it loads (hashed now), with the scenario file of a variant."""
+    from pioneer.control.registry import resolve_policy
+    from pioneer.sim.scenarios import scenario_source
+
+    made = resolve_policy(spec.name, scenario, dict(spec.kwargs))
+    source = scenario_source(scenario)
+    if source is not None:
+        made["files"]["scenario_file"] = file_record(source)
+    return dict(json.loads(to_json(made)))  # exactly as it reads back from a file
 
 
 def _worker_init() -> None:
@@ -168,7 +225,7 @@ def run_task(task: Task) -> dict[str, Any]:
     """Run one episode and return its JSON-able record."""
     from pioneer.eval.episode import run_episode
 
-    policy = _make_policy(task.policy, task.scenario)
+    policy = _make_policy(task.policy, task.scenario, task.made_by)
     t0 = time.perf_counter()
     env_seed = episode_seed(task.scenario, task.seed, task.trial, task.seed_set)
     rec, _ = run_episode(task.scenario, policy, env_seed)
@@ -183,92 +240,9 @@ def run_task(task: Task) -> dict[str, Any]:
         wall_time_s=wall,
         decision_ms=1000.0 * wall / max(rec.steps, 1),
     )
+    if task.made_by:
+        d["made_by"] = json.loads(task.made_by)
     return d
-
-
-# ------------------------------------------------------------------------------ records file
-def read_records(path: str | Path) -> list[dict[str, Any]]:
-    """All records of an ``episodes.jsonl``; a malformed line raises :class:`DataError`.
-
-    A last line without a newline (a write cut by a crash) is dropped with a warning on
-    stderr, since its episode will simply be run again.
-    """
-    p = Path(path)
-    if not p.exists():
-        return []
-    text = p.read_text()
-    lines = text.split("\n")
-    partial = lines[-1] if lines[-1] else None
-    out = []
-    for i, line in enumerate(lines[:-1], start=1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line)
-        except json.JSONDecodeError as exc:
-            raise DataError(
-                expect(
-                    f"{p}: line {i}",
-                    "one JSON record",
-                    line[:60],
-                    "delete or repair that line, then resume",
-                )
-            ) from exc
-        if not isinstance(rec, dict):
-            raise DataError(
-                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
-            )
-        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
-        if missing:
-            raise DataError(
-                expect(
-                    f"{p}: line {i}",
-                    "fields scenario/policy/seed/trial/event",
-                    sorted(missing),
-                    "delete that line",
-                )
-            )
-        out.append(rec)
-    if partial is not None:
-        import sys
-
-        print(
-            f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
-            file=sys.stderr,
-        )
-        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
-            fh.write("\n".join(lines[:-1]) + ("\n" if len(lines) > 1 else ""))
-    return out
-
-
-def _append(fh: Any, rec: dict[str, Any]) -> None:
-    """Append one whole record line; if the disk is full, cut the torn line off again so the
-    file resumes cleanly, and name the file in the error."""
-    line = to_json(rec) + "\n"
-    with naming_path(fh.name):
-        pos = fh.tell()
-        try:
-            fh.write(line)
-            fh.flush()
-            os.fsync(fh.fileno())
-        except OSError:
-            with contextlib.suppress(OSError):
-                fh.truncate(pos)
-            raise
-
-
-def _check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: str) -> None:
-    """A folder holds episodes of one seed set (records before seed sets: evaluation)."""
-    found = sorted({str(r.get("seed_set", "evaluation")) for r in records})
-    if found and found != [seed_set]:
-        raise ConfigError(
-            expect(
-                f"{path}: records of the {seed_set} seed set",
-                f"only {seed_set} episodes in one folder",
-                f"{'/'.join(found)} episodes",
-                "evaluate into another --out",
-            )
-        )
 
 
 # ------------------------------------------------------------------------------ driver
@@ -288,38 +262,41 @@ def _tasks(
     ]
 
 
-def build_check(pair: tuple[str, PolicySpec]) -> str:
-    """Build the policy of ``pair`` = (scenario, spec) in this process (kept in its cache);
-    any error it raises surfaces before the first episode runs."""
+def build_check(pair: tuple[str, PolicySpec]) -> dict[str, Any]:
+    """Build the policy of ``pair`` = (scenario, spec) in this process (kept in its cache) and
+    return what makes it (:func:`made_by`); any error it raises surfaces before the first
+    episode runs, and before the run folder is created."""
     scenario, spec = pair
-    _make_policy(spec, scenario)
-    return spec.row
+    made = made_by(spec, scenario)
+    _make_policy(spec, scenario, to_json(made))
+    return made
 
 
-def _pairs(tasks: list[Task]) -> list[tuple[str, PolicySpec]]:
-    return list(dict.fromkeys((t.scenario, t.policy) for t in tasks))
-
-
-# A stream first yields None once every policy of the run is built (a policy that cannot be
-# built fails the run before any episode, and before the records file is opened), then the
-# records as the episodes finish.
-def _local(tasks: list[Task], workers: int) -> Generator[dict[str, Any] | None, None, None]:
+# A stream first yields what makes every (scenario, row) of the run, once every policy is
+# built (a policy that cannot be built fails the run before anything is written); then it runs
+# ``tasks`` — a list the caller fills after that first yield, holding the folder's lock — and
+# yields the records as the episodes finish.
+def _local(
+    pairs: list[tuple[str, PolicySpec]], tasks: list[Task], workers: int
+) -> Generator[Any, None, None]:
+    keys = [(sc, spec.row) for sc, spec in pairs]
     if workers <= 1:
-        for pair in _pairs(tasks):
-            build_check(pair)
-        yield None
+        yield dict(zip(keys, map(build_check, pairs), strict=True))
         for t in tasks:
             yield run_task(t)
         return
     from pioneer.parallel import bounded_map, spawn_pool
 
     with spawn_pool(workers, _worker_init) as pool:
-        list(pool.map(build_check, _pairs(tasks)))
-        yield None
+        yield dict(zip(keys, pool.map(build_check, pairs), strict=True))
         yield from bounded_map(pool, run_task, tasks, 4 * workers)
 
 
-def _ray(tasks: list[Task], address: str | None) -> Generator[dict[str, Any] | None, None, None]:
+def _ray(
+    pairs: list[tuple[str, PolicySpec]], tasks: list[Task], address: str | None
+) -> Generator[Any, None, None]:
+    if address:
+        check_reachable(address)
     try:
         import ray
     except ImportError as exc:
@@ -344,8 +321,8 @@ def _ray(tasks: list[Task], address: str | None) -> Generator[dict[str, Any] | N
         remote, build = (ray.remote(runtime_env=env)(f) for f in (run_task, build_check))
     refs: list[Any] = []
     try:
-        ray.get([build.remote(pair) for pair in _pairs(tasks)])
-        yield None
+        made = ray.get([build.remote(pair) for pair in pairs])
+        yield {(sc, spec.row): m for (sc, spec), m in zip(pairs, made, strict=True)}
         refs = [remote.remote(t) for t in tasks]
         while refs:
             done, refs = ray.wait(refs, num_returns=1)
@@ -358,19 +335,65 @@ def _ray(tasks: list[Task], address: str | None) -> Generator[dict[str, Any] | N
         raise
 
 
+RAY_CONNECT_TIMEOUT_S = 5.0  # [s] to open a TCP connection to a Ray cluster's address
+
+
+def check_reachable(address: str) -> None:
+    """Refuse, in one line naming it, a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``)
+    where nothing accepts a connection — before Ray retries it for minutes with pages of
+    warnings. ``auto``, ``local`` and other forms are left to Ray."""
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        return
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        why = exc.strerror or type(exc).__name__
+        raise ConfigError(
+            expect(
+                "--ray-address",
+                "the address of a running Ray cluster",
+                f"{address} ({why})",
+                "start the cluster (ray start --head) or fix the address; without "
+                "--ray-address a local Ray starts",
+            )
+        ) from exc
+
+
 def _ray_init(ray: Any, address: str | None) -> None:
     """``ray.init``, keeping this process's SIGTERM handler (Ray sets its own, which exits
-    without the interruption's line)."""
+    without the interruption's line); a cluster that cannot be joined is one line."""
+    import logging
+
     main = threading.current_thread() is threading.main_thread()
     handler = signal.getsignal(signal.SIGTERM) if main else None
-    ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    try:
+        ray.init(
+            address=address,
+            include_dashboard=False,
+            log_to_driver=False,
+            logging_level=logging.ERROR,
+        )
+    except (ConnectionError, TimeoutError, RuntimeError) as exc:
+        raise ConfigError(
+            expect(
+                "--ray-address",
+                "a Ray cluster to join",
+                f"{address or 'a local Ray'} ({str(exc).splitlines()[0] if str(exc) else exc})",
+                "start the cluster (ray start --head) or fix the address",
+            )
+        ) from exc
     if handler is not None:
         signal.signal(signal.SIGTERM, handler)
 
 
 def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
     """Fail before running anything when a policy would load a part the scenario does not
-    have — each registry entry's light check, without building the policies (no torch)."""
+    have, or a given reward model that does not fit it — each registry entry's light check,
+    without building the policies (no torch)."""
     from pioneer.control.registry import check_parts
 
     for sc in scenarios:
@@ -378,9 +401,9 @@ def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec
             check_parts(spec.name, sc, dict(spec.kwargs))
 
 
-def _record_scenarios(out: Path, names: Sequence[str]) -> None:
-    """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
-    from pioneer.io import write_text_atomic
+def _pinned_scenarios(out: Path, names: Sequence[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(recorded, mine)``: the scenario definitions in ``out/scenarios.json`` and those of
+    ``names`` now; a changed one is refused (reads only)."""
     from pioneer.sim.scenarios import pin_scenario
 
     p = out / SCENARIOS_FILE
@@ -390,9 +413,49 @@ def _record_scenarios(out: Path, names: Sequence[str]) -> None:
         raise DataError(
             expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
         ) from exc
-    mine = {n: pin_scenario(n, known.get(n), str(out)) for n in names}
+    return known, {n: pin_scenario(n, known.get(n), str(out)) for n in names}
+
+
+def _record_scenarios(out: Path, names: Sequence[str]) -> None:
+    """Add the scenarios' full configs to ``out/scenarios.json``; refuse a changed one."""
+    from pioneer.io import write_text_atomic
+
+    known, mine = _pinned_scenarios(out, names)
     if any(n not in known for n in mine):
-        write_text_atomic(p, to_json({**known, **mine}, indent=1) + "\n")
+        write_text_atomic(out / SCENARIOS_FILE, to_json({**known, **mine}, indent=1) + "\n")
+
+
+def _check_folder(
+    out: Path,
+    scenarios: Sequence[str],
+    seed_set: str,
+    made: MadeBy,
+    records: Sequence[Mapping[str, Any]],
+) -> None:
+    """Everything a resume must agree with in ``out``: the seed set of its records, the
+    scenarios' definitions and what made its rows (reads only)."""
+    check_seed_set(out / EPISODES_FILE, records, seed_set)
+    _pinned_scenarios(out, scenarios)
+    check_made_by(out, made, read_manifest(out), records)
+
+
+def _start_over(out: Path) -> None:
+    """Delete the run's records and what describes them (``overwrite``), nothing else."""
+    for name in RUN_FILES:
+        with contextlib.suppress(FileNotFoundError):
+            (out / name).unlink()
+
+
+def _check_rows(policies: Sequence[PolicySpec]) -> None:
+    for spec in policies:
+        if spec.label:
+            check_name(f"policy {spec.name!r} label", spec.label)
+    rows = [spec.row for spec in policies]
+    twice = sorted({r for r in rows if rows.count(r) > 1})
+    if twice:
+        raise ConfigError(
+            expect("policy rows", "distinct labels", twice, "add label=NAME to the repeated policy")
+        )
 
 
 def evaluate(
@@ -407,9 +470,16 @@ def evaluate(
     progress: bool = True,
     on_record: Callable[[dict[str, Any]], None] | None = None,
     seed_set: str = "evaluation",
+    overwrite: bool = False,
 ) -> list[dict[str, Any]]:
     """Run (or resume) the evaluation on the ``seed_set`` episodes (evaluation seeds, or
-    validation seeds for choices and tuning); returns every record (old and new)."""
+    validation seeds for choices and tuning); returns every record (old and new).
+
+    Every input is checked and every policy built before ``out_dir`` is created or changed;
+    then the run holds the folder's lock (:func:`pioneer.io.run_lock`). Resuming a row made
+    otherwise than the folder's row of the same label is refused (module docstring);
+    ``overwrite`` deletes the folder's records, manifest and summaries first and starts over.
+    """
     if seeds < 1 or trials < 1:
         raise ConfigError(
             expect("seeds/trials", "integers >= 1", (seeds, trials), "fix the counts")
@@ -421,39 +491,58 @@ def evaluate(
     from pioneer.control.registry import check_policy_name
     from pioneer.sim.scenarios import get_scenario
 
-    for sc in scenarios:  # fail before running anything, not hours in
-        get_scenario(sc)
+    # fail before running anything, not hours in; each scenario by its own name, as its records
+    # carry it (and its episode seeds derive from it)
+    scenarios = list(dict.fromkeys(get_scenario(sc).name for sc in scenarios))
     for spec in policies:
         check_policy_name(spec.name)
+    _check_rows(policies)
     _check_shipped_parts(scenarios, policies)
-    out = Path(out_dir)
-    output_dir(out)
-    _record_scenarios(out, scenarios)
+    out = output_dir_kind(out_dir)  # a file there is refused; nothing is created yet
     path = out / EPISODES_FILE
-    records = read_records(path)
-    _check_seed_set(path, records, seed_set)
-    done = {(r["scenario"], r["policy"], int(r["seed"]), int(r["trial"])) for r in records}
-    todo = [t for t in _tasks(scenarios, policies, seeds, trials, seed_set) if t.key not in done]
+    records: list[dict[str, Any]] = [] if overwrite else parse_records(path)[0]
+    if not overwrite:  # a folder that cannot be resumed is refused before any policy is built
+        check_seed_set(path, records, seed_set)
+        _pinned_scenarios(out, scenarios)
+    every = _tasks(scenarios, policies, seeds, trials, seed_set)
+    total = len({key_of(r) for r in records} | {t.key for t in every})
+    pairs = list(dict.fromkeys((t.scenario, t.policy) for t in every))
+    todo: list[Task] = []  # filled under the folder's lock, once every policy is built
     n_workers = worker_count(workers)
-    stream = _ray(todo, ray_address) if backend == "ray" else _local(todo, n_workers)
-    total = len(done) + len(todo)
+    stream = _ray(pairs, todo, ray_address) if backend == "ray" else _local(pairs, todo, n_workers)
     with (
         kept(lambda: f"{len(records)} of {total} episodes kept in {path}"),
         contextlib.closing(stream),  # its pool stops with the run, whatever stops the run
     ):
-        next(stream)  # every policy built before the first episode and the records file
-        with (
-            open(check_regular_target(path), "a") as fh,
-            progress_bar(
-                total=total, initial=len(done), desc="episodes", unit="ep", enabled=progress
-            ) as bar,
-        ):
-            for rec in stream:
-                assert rec is not None
-                with deferred():  # a record is written whole and counted
-                    _append(fh, rec)
-                    records.append(rec)
-                if on_record is not None:
-                    on_record(rec)
-                bar.update(1)
+        made: MadeBy = next(stream)  # every policy built, before anything is written
+        if not overwrite:
+            check_made_by(out, made, read_manifest(out), records)
+        with run_lock(out):
+            if overwrite:
+                _start_over(out)
+            records = read_records(path)  # again, holding the lock: the folder is ours now
+            _check_folder(out, scenarios, seed_set, made, records)
+            _record_scenarios(out, scenarios)
+            write_manifest(out, read_manifest(out), made)
+            done = {key_of(r) for r in records}
+            made_json = {pair: to_json(m) for pair, m in made.items()}
+            todo.extend(
+                dataclasses.replace(t, made_by=made_json[t.scenario, t.policy.row])
+                for t in every
+                if t.key not in done
+            )
+            total = len(done) + len(todo)
+            with (
+                open(check_regular_target(path), "a") as fh,
+                progress_bar(
+                    total=total, initial=len(done), desc="episodes", unit="ep", enabled=progress
+                ) as bar,
+            ):
+                for rec in stream:
+                    with deferred():  # a record is written whole and counted
+                        append_record(fh, rec)
+                        records.append(rec)
+                    if on_record is not None:
+                        on_record(rec)
+                    bar.update(1)
     return records

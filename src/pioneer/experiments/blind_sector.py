@@ -25,7 +25,7 @@ from pioneer.data import shipped_student
 from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import run_episode
-from pioneer.io import atomic_path, output_dir, to_json
+from pioneer.io import atomic_path, inside, output_dir, to_json
 from pioneer.laser import UNSEEN_RULES
 from pioneer.learn.export import export_onnx
 from pioneer.learn.models import load_student
@@ -116,12 +116,18 @@ def run_blind_sector_study(
     bad = sorted(set(rules) - set(UNSEEN_RULES))
     if bad or not rules:
         raise ConfigError(expect("rules", f"some of {UNSEEN_RULES}", list(rules), "fix them"))
-    out = Path(out_dir)
-    output_dir(out)
+    if not 0.0 < fov_deg <= 360.0:
+        raise ConfigError(expect("--fov", "in (0°, 360°]", fov_deg, "use e.g. 270"))
+    if episodes < 1:
+        raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
+    from pioneer.sim.scenarios import get_scenario
+
+    students = {sc: shipped_student(get_scenario(sc).name) for sc in scenarios}
+    out = output_dir(out_dir)  # every input checked: only now is anything written
     summary: dict[str, Any] = {"fov_deg": fov_deg, "episodes": episodes, "seeds": SEED_PURPOSE}
     lines: list[str] = []
     for scenario in scenarios:
-        onnx = export_onnx(load_student(shipped_student(scenario)), out / f"{scenario}.onnx")
+        onnx = export_onnx(load_student(students[scenario]), inside(out, f"{scenario}.onnx"))
         summary[scenario] = {}
         for label, fov, rule in _variants(fov_deg, rules):
             rt = StudentRuntime(onnx, config=RuntimeConfig(unseen=rule))

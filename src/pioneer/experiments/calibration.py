@@ -214,13 +214,15 @@ def calibrate(
     """Measure the world statistics of ``scenarios`` on ``episodes`` validation seeds each;
     write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
     policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
-    from pioneer.control.registry import policy_factory
+    from pioneer.control.registry import check_parts, policy_factory
     from pioneer.sim.scenarios import get_scenario, pin_scenario
 
     if episodes < 1:
         raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
     names = [get_scenario(s).name for s in scenarios]  # unknown names fail here, at once
     policy_factory(driver)  # an unknown driver fails here, at once
+    for s in names:  # and one without its parts in a scenario (a student without a shipped one)
+        check_parts(driver, s, {})
     tasks = [
         (s, validation_seed("calibrate", s, k), driver) for s in names for k in range(episodes)
     ]

@@ -28,7 +28,7 @@ from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
-from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.io import inside, output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.parallel import worker_count
 
 __all__ = [
@@ -210,7 +210,7 @@ def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
 
     paths = {}
     for sc in scenarios:
-        p = out / "models" / f"{sc}.reward.npz"
+        p = inside(out, f"models/{sc}.reward.npz")
         if not p.exists():
             default_reward(sc).save(p)
         paths[sc] = str(p)
@@ -224,17 +224,31 @@ def reproduce(
     progress: bool = True,
     extra_policies: Sequence[PolicySpec] = (),
     seed_set: str = "evaluation",
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run the whole pipeline on the ``seed_set`` episodes (evaluation seeds for the reported
     tables, validation seeds to check a choice); returns a small summary (paths and headline
-    numbers)."""
+    numbers). ``overwrite``: the evaluation starts over (its records in ``OUT/eval`` are
+    deleted). One run writes to ``out_dir`` at a time (:func:`pioneer.io.run_lock`)."""
     if profile not in PROFILES:
         raise ConfigError(
             expect("profile", f"one of {sorted(PROFILES)}", profile, "use smoke, quick or paper")
         )
+    output_dir_kind(out_dir)
+    with run_lock(out_dir) as out:
+        return _reproduce(profile, out, workers, progress, extra_policies, seed_set, overwrite)
+
+
+def _reproduce(
+    profile: str,
+    out: Path,
+    workers: int | None,
+    progress: bool,
+    extra_policies: Sequence[PolicySpec],
+    seed_set: str,
+    overwrite: bool,
+) -> dict[str, Any]:
     prof = PROFILES[profile]
-    out = Path(out_dir)
-    output_dir(out)
     t0 = time.perf_counter()
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
@@ -244,7 +258,7 @@ def reproduce(
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
     policies += extra + students
     if progress:
-        _announce(profile, prof, [p.row for p in policies], out, workers)
+        _announce(profile, prof, [p.row for p in policies], out, workers, fresh=overwrite)
     records = evaluate(
         SCENARIOS,
         policies,
@@ -254,6 +268,7 @@ def reproduce(
         workers,
         progress=progress,
         seed_set=seed_set,
+        overwrite=overwrite,
     )
     summary = summarize(records)
     md = write_summary(
@@ -299,16 +314,22 @@ def reproduce(
 
 
 def _announce(
-    profile: str, prof: Profile, rows: Sequence[str], out: Path, workers: int | None
+    profile: str,
+    prof: Profile,
+    rows: Sequence[str],
+    out: Path,
+    workers: int | None,
+    fresh: bool = False,
 ) -> None:
-    """One line before the work: how many episodes, how many are done, the expected time."""
+    """One line before the work: how many episodes, how many are done (none when ``fresh``:
+    starting over), the expected time."""
     import sys
 
     from pioneer.eval.harness import EPISODES_FILE, read_records
 
     n_workers = worker_count(workers)
     per_row = len(SCENARIOS) * prof.seeds * prof.trials
-    done = len(read_records(out / "eval" / EPISODES_FILE))
+    done = 0 if fresh else len(read_records(out / "eval" / EPISODES_FILE))
     total = per_row * len(rows)
     left = 1.0 - done / total
     paper = expected_seconds([r for r in rows if r in PAPER_ROWS], per_row, n_workers) * left

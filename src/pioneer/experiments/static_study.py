@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 
 from pioneer.control.teacher import LookaheadTeacher
+from pioneer.errors import DataError, expect
 from pioneer.eval.episode import run_episode
-from pioneer.io import output_dir
+from pioneer.io import output_dir, output_dir_kind
 from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
 from pioneer.reward.features import feature_map
@@ -28,9 +29,11 @@ __all__ = ["run_static_study"]
 def run_static_study(
     demos: Dataset, out_dir: str | Path, n_trajectories: int = 6
 ) -> dict[str, Any]:
-    """Fit the two rewards, draw the three panels into ``out_dir/static_study.png``."""
+    """Fit the two rewards, draw the three panels into ``out_dir/static_study.png`` (created
+    only when the study has run: refused demos leave nothing behind)."""
+    _check_demos(demos)
+    output_dir_kind(out_dir)
     out = Path(out_dir)
-    output_dir(out)
     fm = feature_map("xy")
     z, g = fm.from_dataset(demos), demos.gamma
     pos = g > 0
@@ -66,6 +69,7 @@ def run_static_study(
         events.append(rec.event)
     from pioneer.viz.study import plot_static_study
 
+    output_dir(out)
     human = st.h_pos[0, 0]
     plot_static_study(
         world,
@@ -92,6 +96,31 @@ def run_static_study(
         "teacher_side": ["right" if np.mean(t[:, 0]) > 0 else "left" for t in trajs],
     }
     return summary
+
+
+def _check_demos(demos: Dataset) -> None:
+    """Demonstrations of the static study, positive and negative (Fig. 3 contrasts them)."""
+    from pioneer.reward.features import default_feature_map
+
+    if default_feature_map(demos.scenarios) != "xy":
+        raise DataError(
+            expect(
+                "static-study demos",
+                "demonstrations of the static scenario",
+                sorted(set(demos.scenarios)),
+                "pass the static study's dataset (pioneer demos generate --scenario static)",
+            )
+        )
+    lacking = demos.one_sided()
+    if lacking is not None:
+        raise DataError(
+            expect(
+                "static-study demos",
+                "positive and negative samples (Fig. 3 contrasts them)",
+                lacking,
+                "add demonstrations of the other kind",
+            )
+        )
 
 
 def _grid_states(scen: Any, pts: np.ndarray) -> State:

@@ -8,7 +8,9 @@ round 0). All labelled frames are aggregated and the student is retrained after 
 Labels are the teacher's smoothed command u_t = α u* + (1 − α) u_{t−1}, u_{t−1} the command
 applied (a frame's label is what the teacher would send had it been driving).
 
-Output directory (everything written atomically; a rerun of the same command resumes)::
+Output directory (everything written atomically; a rerun of the same command resumes; one run
+writes to it at a time, :func:`pioneer.io.run_lock`; every input, the reward file included,
+is checked before the folder is created or changed)::
 
     DIR/config.json                      the DaggerConfig (a rerun must match it)
     DIR/scenario.json                    the scenario's full config (a rerun must match it)
@@ -49,10 +51,19 @@ import torch
 from numpy.typing import NDArray
 
 from pioneer.config import Config
+from pioneer.data import base_scenario
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import kept
-from pioneer.io import atomic_path, load_npz, output_dir, to_json, write_text_atomic
+from pioneer.io import (
+    atomic_path,
+    inside,
+    load_npz,
+    output_dir_kind,
+    run_lock,
+    to_json,
+    write_text_atomic,
+)
 from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import worker_init as _worker_init
@@ -183,6 +194,7 @@ def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
 
 
 def _check_config(out: Path, cfg: DaggerConfig) -> None:
+    """Refuse settings that differ from those of the run in ``out`` (reads only)."""
     p = out / CONFIG_FILE
     if p.exists():
         old = {**DaggerConfig().to_dict(), **json.loads(p.read_text())}  # older runs: defaults
@@ -198,7 +210,6 @@ def _check_config(out: Path, cfg: DaggerConfig) -> None:
                     "use the same options to resume, or a new --out directory",
                 )
             )
-    write_text_atomic(p, to_json(cfg.to_dict(), indent=2) + "\n")
 
 
 def scenario_set(pattern: str) -> list[str]:
@@ -223,8 +234,9 @@ def scenario_set(pattern: str) -> list[str]:
     return names
 
 
-def _check_scenario(out: Path, names: list[str]) -> None:
-    """Record the scenarios' full definitions; a resumed run must see the same ones."""
+def _check_scenario(out: Path, names: list[str]) -> dict[str, Any] | None:
+    """The scenarios' full definitions to record, if ``out`` has none yet; a resumed run must
+    see the same ones (reads only)."""
     from pioneer.sim.scenarios import pin_scenario
 
     p = out / SCENARIO_FILE
@@ -243,8 +255,7 @@ def _check_scenario(out: Path, names: list[str]) -> None:
                 )
             )
         mine = {"scenarios": {n: pin_scenario(n, old.get(n), str(out)) for n in names}}
-    if recorded is None:
-        write_text_atomic(p, to_json(mine, indent=1) + "\n")
+    return mine if recorded is None else None
 
 
 def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:
@@ -291,27 +302,61 @@ def _kept(cfg: DaggerConfig, out: Path) -> str:
     return f"{episodes} of {total} episodes and {students} of {rounds} rounds kept in {out}"
 
 
-def _prepare(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> dict[str, Path]:
-    """Check ``out`` against ``cfg`` (resume); return the teacher's reward file per scenario:
-    ``reward`` for all, else the one fitted on the shipped demos of the scenario's base
-    (``DIR/reward.npz`` for one scenario, ``DIR/reward-BASE.npz`` for a pattern)."""
-    from pioneer.data import base_scenario
-    from pioneer.io import remove_partial_writes
+def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> list[str]:
+    """The run's scenarios, after checking every input against them and ``out`` (reads only,
+    so a refused run leaves the file system as it was): the reward file loads and fits each
+    scenario, or the default reward each needs can be fitted (on its base's shipped demos);
+    a resumed run has the same settings and scenario definitions."""
+    from pioneer.reward.default import check_reward_fits, default_reward
+    from pioneer.reward.density import DensityReward
 
     names = scenario_set(cfg.scenario)
-    remove_partial_writes(output_dir(out) / "rounds")  # a killed worker's half-written episode
+    output_dir_kind(out)
     _check_config(out, cfg)
     _check_scenario(out, names)
+    if reward is not None:
+        model = DensityReward.load(reward)
+        for name in names:
+            check_reward_fits(model, name, str(reward))
+    else:
+        for name, path in _default_reward_paths(out, names).items():
+            if not path.exists():
+                default_reward(base_scenario(name))  # cached: _prepare saves this very fit
+    return names
+
+
+def _default_reward_paths(out: Path, names: list[str]) -> dict[str, Path]:
+    """Where the default reward of each scenario's base is kept: ``DIR/reward.npz`` for one
+    scenario, ``DIR/reward-BASE.npz`` for a pattern."""
+    return {
+        name: inside(out, "reward.npz" if len(names) == 1 else f"reward-{base_scenario(name)}.npz")
+        for name in names
+    }
+
+
+def _prepare(
+    cfg: DaggerConfig, out: Path, reward: str | Path | None, names: list[str]
+) -> dict[str, Path]:
+    """Record the run's settings and scenarios in ``out`` (holding its lock; checked by
+    :func:`_check_inputs`) and return the teacher's reward file per scenario: ``reward`` for
+    all, else the one fitted on the shipped demos of the scenario's base
+    (:func:`_default_reward_paths`)."""
+    from pioneer.io import remove_partial_writes
+
+    _check_config(out, cfg)  # again, holding the lock
+    scenarios = _check_scenario(out, names)
+    remove_partial_writes(out / "rounds")  # a killed worker's half-written episode
+    write_text_atomic(out / CONFIG_FILE, to_json(cfg.to_dict(), indent=2) + "\n")
+    if scenarios is not None:
+        write_text_atomic(out / SCENARIO_FILE, to_json(scenarios, indent=1) + "\n")
     if reward is not None:
         return dict.fromkeys(names, Path(reward))
     from pioneer.reward.default import default_reward
 
-    paths = {}
-    for name in names:
-        base = base_scenario(name)
-        paths[name] = out / ("reward.npz" if len(names) == 1 else f"reward-{base}.npz")
-        if not paths[name].exists():
-            default_reward(base).save(paths[name])
+    paths = _default_reward_paths(out, names)
+    for name, path in paths.items():
+        if not path.exists():
+            default_reward(base_scenario(name)).save(path)
     return paths
 
 
@@ -392,9 +437,20 @@ def run_dagger(
     ``reward``: the teacher's density-reward file; default the reward fitted on the shipped
     demonstrations of the scenario (saved to ``DIR/reward.npz``).
     """
-    cfg = config
     out = Path(out_dir)
-    rewards = _prepare(cfg, out, reward)
+    names = _check_inputs(config, out, reward)
+    with run_lock(out):
+        return _run(config, out, workers, _prepare(config, out, reward, names), progress, on_round)
+
+
+def _run(
+    cfg: DaggerConfig,
+    out: Path,
+    workers: int | None,
+    rewards: dict[str, Path],
+    progress: bool,
+    on_round: Callable[[dict[str, Any]], None] | None,
+) -> DaggerResult:
     n_workers = worker_count(workers)
     # Train on one thread: float32 sums depend on the thread count, and the weights must not
     # depend on --workers or the machine (the networks are small; threads gain little).

@@ -177,6 +177,15 @@ def export_checkpoint(
             )
         )
     model = load_student(p)
+    if action_mode is not None and not isinstance(model, MDN):
+        raise ConfigError(
+            expect(
+                "--action-mode",
+                "an MDN student (it picks the mixture's action)",
+                f"{p}: an {model.config.kind} student",
+                "drop --action-mode",
+            )
+        )
     target = Path(out)
     with atomic_path(target) as tmp:
         export_onnx(model, tmp, opset=opset, action_mode=action_mode)

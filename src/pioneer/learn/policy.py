@@ -23,7 +23,7 @@ import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
-from pioneer.errors import ConfigError, expect
+from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
 
 __all__ = ["StudentPolicy", "make_student_policy"]
@@ -105,6 +105,29 @@ def make_student_policy(
                 f"use the policy 'student-{model.kind}'",
             )
         )
+    _check_width(path, model.config.obs_dim, scenario)
     policy = StudentPolicy(model, name=name, action_mode=action_mode)
     policy.checkpoint = Path(path)
     return policy
+
+
+def _check_width(path: str, width: int, scenario: str | None) -> None:
+    """A student reads the observation of its scenario's LiDAR (29-D with the paper's): one of
+    another width is refused when it loads, not at its first decision."""
+    from pioneer.sim.lidar import OBS_DIM
+
+    wanted = OBS_DIM
+    if scenario is not None:
+        from pioneer.sim.scenarios import get_scenario
+
+        wanted = get_scenario(scenario).sim.lidar.obs_dim
+    if width != wanted:
+        where = f"scenario {scenario}'s" if scenario is not None else "the"
+        raise DataError(
+            expect(
+                f"student checkpoint {path}: obs_dim",
+                f"{wanted} ({where} observation)",
+                width,
+                "use a student trained on this observation (pioneer distill)",
+            )
+        )

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from pathlib import Path
 from typing import Literal
 
 from pioneer.config import Config
@@ -20,7 +21,12 @@ from pioneer.data import base_scenario, shipped_demos
 from pioneer.errors import DataError, expect
 from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
-from pioneer.reward.features import FeatureName, default_feature_map, feature_map
+from pioneer.reward.features import (
+    FEATURE_MAPS,
+    FeatureName,
+    default_feature_map,
+    feature_map,
+)
 from pioneer.reward.grading import graded_gamma
 
 __all__ = [
@@ -28,8 +34,10 @@ __all__ = [
     "MIRROR_OF",
     "PLAIN_RECIPE",
     "RewardRecipe",
+    "check_reward_fits",
     "default_features",
     "default_reward",
+    "default_reward_demos",
     "fit_reward",
 ]
 
@@ -83,15 +91,71 @@ def fit_reward(
     return model
 
 
+def _default_recipe(scenario: str) -> RewardRecipe:
+    return DEFAULT_RECIPE if base_scenario(scenario) in MIRROR_OF else PLAIN_RECIPE
+
+
+def default_reward_demos(scenario: str) -> dict[str, Path]:
+    """The shipped files :func:`default_reward` fits for ``scenario``: ``{"demos": …}`` and,
+    when its recipe mirrors, ``{"mirror_demos": …}`` (what a run records it loaded)."""
+    files = {"demos": shipped_demos(scenario)}
+    if _default_recipe(scenario).mirror:
+        files["mirror_demos"] = shipped_demos(MIRROR_OF[base_scenario(scenario)])
+    return files
+
+
 @functools.lru_cache(maxsize=8)
 def default_reward(scenario: str) -> DensityReward:
     """The density reward fitted on the shipped demos of ``scenario`` (cached per process)."""
-    base = base_scenario(scenario)
-    recipe = DEFAULT_RECIPE if base in MIRROR_OF else PLAIN_RECIPE
-    mirror = Dataset.load(shipped_demos(MIRROR_OF[base])) if recipe.mirror else None
-    model = fit_reward(Dataset.load(shipped_demos(scenario)), recipe, mirror)
-    model.info_["demos"] = f"shipped:{base}"
+    files = default_reward_demos(scenario)
+    mirror = Dataset.load(files["mirror_demos"]) if "mirror_demos" in files else None
+    model = fit_reward(Dataset.load(files["demos"]), _default_recipe(scenario), mirror)
+    model.info_["demos"] = f"shipped:{base_scenario(scenario)}"
     return model
+
+
+def check_reward_fits(model: DensityReward, scenario: str, where: str) -> str:
+    """The feature map the teacher of ``scenario`` evaluates ``model`` with (the model's own,
+    else the scenario's default), after checking that the model fits it: for a scenario of a
+    known family — a built-in one, or a variant with a built-in ``base`` — a reward on the
+    static study's (x, y) plane cannot score an elevator rollout, nor an elevator reward a
+    static one; and the model's width must be its feature map's. Raises :class:`DataError`
+    naming ``where`` (the model file)."""
+    own = model.info_.get("features")
+    wanted = default_features(scenario)
+    name = str(own) if own is not None else wanted
+    fix = f"fit a reward on {scenario}'s demonstrations (pioneer reward fit) and pass that"
+    if name not in FEATURE_MAPS:
+        raise DataError(
+            expect(f"reward model {where}", f"features of one of {FEATURE_MAPS}", name, fix)
+        )
+    if _known_family(scenario) and (name == "xy") != (wanted == "xy"):
+        fitted = "the static study's (x, y) position" if name == "xy" else f"{name} (elevator)"
+        needed = "the (x, y) position" if wanted == "xy" else "the observation and command"
+        raise DataError(
+            expect(f"reward model {where}", f"features of {needed} for {scenario}", fitted, fix)
+        )
+    width = len(feature_map(name).names)
+    if len(model.feature_names) != width:
+        raise DataError(
+            expect(
+                f"reward model {where}",
+                f"{width} features ({name})",
+                f"{len(model.feature_names)} features",
+                fix,
+            )
+        )
+    return name
+
+
+def _known_family(scenario: str) -> bool:
+    """Whether ``scenario`` is a static study or an elevator by its base's shipped demos (a
+    variant registered without a base is a world of its own: its reward is the caller's)."""
+    try:
+        shipped_demos(scenario)
+    except DataError:
+        return False
+    return True
 
 
 def default_features(scenario: str) -> str:

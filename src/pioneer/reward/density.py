@@ -322,8 +322,26 @@ class DensityReward:
         model.scale_ = float(meta["scale"])
         model.n_train_ = int(meta["n_train"])
         model.info_ = dict(meta.get("info", {}))
+        _check_layout(p, model.info_.get("features"), model.feature_names)
         model._w = model.alpha_ * model.config.gain2 * np.cos(0.5 * np.pi * (1.0 - model.leverage_))
         return model
+
+
+def _check_layout(p: Path, features: object, names: list[str]) -> None:
+    """A model that names one of PioneeR's feature maps must have that map's features, in its
+    order (a model fitted through the API without names, ``z0, z1, …``, is checked for its
+    width only; a feature map of the caller's own is the caller's to check)."""
+    from pioneer.reward.features import FEATURE_MAPS, feature_map
+
+    if features not in FEATURE_MAPS:
+        return
+    wanted = list(feature_map(str(features)).names)
+    generic = names == [f"z{i}" for i in range(len(names))]
+    if len(names) != len(wanted) or (not generic and names != wanted):
+        got = f"{len(names)} features" + ("" if generic else f" {names[:3]}…")
+        raise DataError(
+            expect(f"{p}: features", f"the {len(wanted)} of {features!r} in order", got, "re-fit")
+        )
 
 
 def _checked_meta(p: Path, arrays: dict[str, Any]) -> dict[str, Any]:

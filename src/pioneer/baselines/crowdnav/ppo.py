@@ -76,7 +76,7 @@ from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import Interrupted, deferred, kept
-from pioneer.io import output_dir, to_json, write_text_atomic
+from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.progress import progress_bar
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
@@ -204,10 +204,12 @@ def train_crowdnav(
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
     ``True`` requires it, ``False`` refuses an ``out`` that holds one (nothing is deleted).
+    Every setting is checked before ``out`` is created; one run writes to it at a time
+    (:func:`pioneer.io.run_lock`).
     """
     ppo = ppo or PPOConfig()
     sc = get_scenario(scenario)
-    out = Path(out_dir)
+    out = output_dir_kind(out_dir)
     ckpt = out / "checkpoint.safetensors"
     _check_resume(resume, ckpt, out)
     if torch_threads is not None:
@@ -216,11 +218,25 @@ def train_crowdnav(
     net = net or CrowdNavConfig(max_humans=max(1, len(sc.humans)))
     warm = warm or WarmStartConfig()
     tr = _Trainer(sc, ppo, net, reward or CrowdNavRewardConfig(), warm)
+    with run_lock(out):
+        _check_resume(resume, ckpt, out)  # again, holding the lock
+        return _train(tr, out, ckpt, warm, command, progress, on_update)
+
+
+def _train(
+    tr: _Trainer,
+    out: Path,
+    ckpt: Path,
+    warm: WarmStartConfig,
+    command: str,
+    progress: bool,
+    on_update: Callable[[dict[str, float]], None] | None,
+) -> dict[str, Any]:
+    sc, ppo = tr.scenario, tr.ppo
     resumed_from = None
     if ckpt.is_file():
         tr.load(ckpt)
         resumed_from = tr.update
-    output_dir(out)
     bc_info = _imitation(tr, out, resumed_from is None, progress)
 
     def info() -> dict[str, Any]:

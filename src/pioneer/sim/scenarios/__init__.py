@@ -23,6 +23,7 @@ from pioneer.sim.scenarios.registry import (
     register_scenario,
     scenario_base,
     scenario_names,
+    scenario_source,
 )
 from pioneer.sim.scenarios.sampling import sample_state
 from pioneer.sim.scenarios.spec import HumanSpec, Region, ScenarioConfig
@@ -44,5 +45,6 @@ __all__ = [
     "sample_state",
     "scenario_base",
     "scenario_names",
+    "scenario_source",
     "static_study_scenario",
 ]

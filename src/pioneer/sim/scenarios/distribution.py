@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from pioneer.config import Config
-from pioneer.errors import PioneerError, ScenarioError, expect
+from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
+from pioneer.io import check_name
 from pioneer.sim.scenarios.layouts import ElevatorLayout, elevator_scenario
 from pioneer.sim.scenarios.registry import check_placement
 from pioneer.sim.world import SimConfig
@@ -135,6 +136,10 @@ def sample_variants(
     the number of draws rejected because their bodies could not be placed."""
     if n < 1:
         raise ScenarioError(expect("layouts to draw", "n >= 1", n, "ask for at least one"))
+    try:  # the variants' names are PREFIX-0000, …: file names in the runs that use them
+        check_name("layout name prefix (--prefix)", prefix)
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
     variants: dict[str, dict[str, Any]] = {}
     rejected = 0

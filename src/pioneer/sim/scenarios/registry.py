@@ -13,6 +13,7 @@ import numpy as np
 
 from pioneer.config import Config
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
+from pioneer.io import check_name
 from pioneer.laser import LidarConfig
 from pioneer.sim.humans import SocialForceConfig
 from pioneer.sim.scenarios.layouts import (
@@ -56,6 +57,7 @@ _BUILTIN = frozenset(_REGISTRY)
 # Variant → the built-in scenario whose learned parts it uses. The 0.3 m-body presets are the
 # paper world with thinner people: they use its demonstrations, reward and students.
 _BASES: dict[str, str] = {"hr-rl-r03": "hr-rl", "hl-rr-r03": "hl-rr"}
+_SOURCES: dict[str, Path] = {}  # variant → the scenario file it was loaded from
 
 
 def _key(name: str) -> str:
@@ -70,7 +72,13 @@ def scenario_names() -> list[str]:
 
 
 def _check_new_name(where: str, name: str) -> None:
-    if not _key(name) or _key(name) in _BUILTIN:
+    """A variant's name: new, and safe as a file name (a PNG, a reward file is named after
+    it): letters, digits, ``-``, ``_``, ``.``, no leading dot (:func:`pioneer.io.check_name`)."""
+    try:
+        check_name(where, name)
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
+    if _key(name) in _BUILTIN:
         raise ScenarioError(
             expect(where, f"a new non-empty name (not {sorted(_BUILTIN)})", name, "rename it")
         )
@@ -109,6 +117,7 @@ def register_scenario(
         )
     check_placement(f"scenario {name!r}", cfg)
     _register(name, factory, base)
+    _SOURCES.pop(_key(name), None)
 
 
 def check_placement(where: str, cfg: ScenarioConfig) -> None:
@@ -130,6 +139,15 @@ def _register(name: str, factory: Callable[[], ScenarioConfig], base: str | None
         _BASES.pop(key, None)
     else:
         _BASES[key] = _key(base)
+
+
+def scenario_source(name: str) -> Path | None:
+    """The scenario file the variant ``name`` was loaded from (None: built in, or registered
+    in code) — a run records its content hash."""
+    key = _key(name)
+    if key not in _REGISTRY:
+        load_env_scenarios()
+    return _SOURCES.get(key)
 
 
 def scenario_base(name: str) -> str:
@@ -220,6 +238,7 @@ def load_scenario_file(path: str | Path) -> list[str]:
         raise ScenarioError(f"scenario file {p}: {len(refused)} variants refused: {listing}")
     for name, factory in factories.items():  # all or nothing: register only a valid file
         _register(name, factory, bases[name])
+        _SOURCES[_key(name)] = p.resolve()
     return list(factories)
 
 

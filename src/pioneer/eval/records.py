@@ -1,0 +1,149 @@
+"""The records file of a run folder, ``episodes.jsonl``: one JSON record per episode.
+
+Records are appended whole by one writer (:func:`append_record`: line, flush, fsync; a torn
+line is cut off again on a full disk). Reading (:func:`read_records`) refuses a malformed line
+with its line number, drops an unfinished last line (a crash mid-write) with a warning, and
+counts each episode (scenario, policy, seed, trial) once, saying how many repeats it ignored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from pioneer.errors import ConfigError, DataError, expect
+from pioneer.io import naming_path, to_json
+
+__all__ = ["append_record", "check_seed_set", "key_of", "parse_records", "read_records"]
+
+
+def key_of(rec: Mapping[str, Any]) -> tuple[str, str, int, int]:
+    """The identity of a record's episode: (scenario, policy row, seed, trial)."""
+    return (str(rec["scenario"]), str(rec["policy"]), int(rec["seed"]), int(rec["trial"]))
+
+
+def parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
+    """``(records, the file's complete lines, duplicates dropped)`` of ``p`` (none if it does
+    not exist), reading only; a last line without a newline is left out of both."""
+    text = p.read_text() if p.exists() else ""
+    lines = text.split("\n")
+    whole = lines[:-1]
+    out: list[dict[str, Any]] = []
+    seen: set[tuple[str, str, int, int]] = set()
+    duplicates = 0
+    for i, line in enumerate(whole, start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "one JSON record",
+                    line[:60],
+                    "delete or repair that line, then resume",
+                )
+            ) from exc
+        if not isinstance(rec, dict):
+            raise DataError(
+                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
+            )
+        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
+        if missing:
+            raise DataError(
+                expect(
+                    f"{p}: line {i}",
+                    "fields scenario/policy/seed/trial/event",
+                    sorted(missing),
+                    "delete that line",
+                )
+            )
+        try:
+            key = key_of(rec)
+        except (TypeError, ValueError) as exc:
+            raise DataError(
+                expect(f"{p}: line {i}", "integer seed and trial", line[:60], "delete that line")
+            ) from exc
+        if key in seen:
+            duplicates += 1
+            continue
+        seen.add(key)
+        out.append(rec)
+    return out, whole, duplicates
+
+
+def read_records(path: str | Path) -> list[dict[str, Any]]:
+    """All records of an ``episodes.jsonl``, each episode (scenario, policy, seed, trial) once;
+    a malformed line raises :class:`DataError`.
+
+    A repeated episode (a line duplicated by hand, or by two runs that once wrote to one
+    folder) counts once — the first record — with one warning on stderr saying how many were
+    ignored. A last line without a newline (a write cut by a crash) is dropped with a warning
+    on stderr, since its episode will simply be run again.
+    """
+    import sys
+
+    p = Path(path)
+    records, whole, duplicates = parse_records(p)
+    if duplicates:
+        print(
+            f"pioneer: warning: {p}: {duplicates} repeated episode record(s) ignored (each "
+            "scenario, policy, seed and trial counts once: the first)",
+            file=sys.stderr,
+        )
+    if _torn(p):
+        print(
+            f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
+            file=sys.stderr,
+        )
+        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
+            fh.write("".join(line + "\n" for line in whole))
+    return records
+
+
+def _torn(p: Path) -> bool:
+    """Whether the file ends in a line without its newline."""
+    if not p.exists():
+        return False
+    with open(p, "rb") as fh:
+        fh.seek(0, os.SEEK_END)
+        if fh.tell() == 0:
+            return False
+        fh.seek(-1, os.SEEK_END)
+        return fh.read(1) != b"\n"
+
+
+def append_record(fh: Any, rec: dict[str, Any]) -> None:
+    """Append one whole record line; if the disk is full, cut the torn line off again so the
+    file resumes cleanly, and name the file in the error."""
+    line = to_json(rec) + "\n"
+    with naming_path(fh.name):
+        pos = fh.tell()
+        try:
+            fh.write(line)
+            fh.flush()
+            os.fsync(fh.fileno())
+        except OSError:
+            with contextlib.suppress(OSError):
+                fh.truncate(pos)
+            raise
+
+
+def check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: str) -> None:
+    """A folder holds episodes of one seed set (records before seed sets: evaluation); records
+    of another are refused."""
+    found = sorted({str(r.get("seed_set", "evaluation")) for r in records})
+    if found and found != [seed_set]:
+        raise ConfigError(
+            expect(
+                f"{path}: records of the {seed_set} seed set",
+                f"only {seed_set} episodes in one folder",
+                f"{'/'.join(found)} episodes",
+                "evaluate into another --out",
+            )
+        )
