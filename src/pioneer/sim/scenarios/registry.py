@@ -135,10 +135,10 @@ def check_placement(where: str, cfg: ScenarioConfig) -> None:
 def _register(name: str, factory: Callable[[], ScenarioConfig], base: str | None) -> None:
     key = _key(name)
     _REGISTRY[key] = factory
-    if base is None and key not in _BUILTIN:
-        _BASES.pop(key, None)
-    else:
+    if base is not None:
         _BASES[key] = _key(base)
+    elif key not in _BUILTIN:  # the built-in presets keep theirs
+        _BASES.pop(key, None)
 
 
 def scenario_source(name: str) -> Path | None:
