@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import resource
-import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +21,7 @@ from pioneer.cli import main
 from pioneer.data import DEMOS_DIR, STUDENTS_DIR
 from pioneer.errors import DataError
 from pioneer.io import check_regular_target, output_dir_kind
+from pioneer_testutils import file_tree
 
 STATIC_DEMOS = str(DEMOS_DIR / "static.npz")
 STUDENT = str(STUDENTS_DIR / "hr-rl-compact-mdn.safetensors")
@@ -58,20 +58,6 @@ COMMANDS: dict[str, tuple[str, str, bool]] = {
 def argv(name: str, out: str | Path) -> list[str]:
     """The command ``name`` writing to ``out``."""
     return [str(out) if word == "OUT" else word for word in COMMANDS[name][0].split()]
-
-
-def _tree(root: Path) -> dict[str, tuple[int, bytes | None]]:
-    """Every entry under ``root``: its type bits and, for regular files, its bytes."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in [*dirnames, *filenames]:
-            p = Path(dirpath) / name
-            mode = p.lstat().st_mode
-            out[str(p.relative_to(root))] = (
-                stat.S_IFMT(mode),
-                p.read_bytes() if stat.S_ISREG(mode) else None,
-            )
-    return out
 
 
 def _one_error_line(capsys: pytest.CaptureFixture[str], code: int, *needles: str) -> str:
@@ -119,10 +105,10 @@ def test_bad_output_path_is_one_line_and_leaves_everything(
     kind = COMMANDS[name][1]
     monkeypatch.chdir(tmp_path)  # a command past the check would write here, not in the repo
     out, needle = _faulty_path(fault, kind, tmp_path)
-    before = _tree(tmp_path)
+    before = file_tree(tmp_path)
     code = main(argv(name, out))
     _one_error_line(capsys, code, needle, "fix:")
-    assert _tree(tmp_path) == before
+    assert file_tree(tmp_path) == before
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))
