@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 import pytest
 from annotated_types import Ge, Gt, Interval, Le, Lt, MinLen, MultipleOf
@@ -291,3 +291,32 @@ def test_converted_configs_keep_their_cross_field_and_choice_checks():
         DensityConfig(inducing="random")
     with pytest.raises(ConfigError, match="an integer >= 1"):
         DensityConfig(max_inducing=0)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Choice(Config):
+    mode: Literal["fast", "safe"] = "fast"
+    level: Literal[1, 2] | None = None
+
+
+def test_a_literal_field_takes_only_its_values_on_every_construction():
+    assert _Choice(mode="safe", level=2).mode == "safe"
+    assert _Choice(level=None).level is None  # optional: None passes
+    for bad in ({"mode": "slow"}, {"mode": 1}, {"level": 3}, {"level": True}):
+        with pytest.raises(ConfigError) as err:
+            _Choice(**bad)
+        assert_house_message(str(err.value))
+        assert "one of" in str(err.value)
+    with pytest.raises(ConfigError, match="mode"):
+        _Choice().replace(mode="slow")
+    with pytest.raises(ConfigError, match="mode"):
+        _Choice.from_dict({"mode": "slow"})
+
+
+@pytest.mark.parametrize(
+    ("cfg", "field"),
+    [(LidarConfig, "sector_layout"), (DensityConfig, "inducing")],
+)
+def test_the_libraries_choices_are_checked_by_the_base(cfg, field):
+    with pytest.raises(ConfigError, match=field):
+        cfg(**{field: "no-such-choice"})

@@ -8,7 +8,8 @@ enforces them once, before any ``__post_init__`` of the subclass runs, with the 
 :func:`check_positive` / :func:`check_nonnegative`. Supported: ``Gt``, ``Ge``, ``Lt``, ``Le``
 and ``Interval`` on ``int`` and ``float`` fields, also inside ``| None`` (``None`` then
 passes). A bounded ``float`` must be finite; a bounded ``int`` must be an integer (not a
-bool). Cross-field checks stay code in ``__post_init__``.
+bool). A ``Literal[...]`` field (a choice) must hold one of its values. Cross-field checks stay
+code in ``__post_init__``.
 
 annotated-types is imported only when a field carries ``Annotated`` metadata, so a config
 without declared bounds (the LiDAR's, the robot runtime's) needs no annotated-types: the
@@ -137,9 +138,29 @@ def _bound_kinds() -> dict[type, tuple[str, str, bool]]:
     }
 
 
-def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | None:
-    """The bounds of one field from its resolved type hint, or ``None`` if it declares none."""
+@dataclasses.dataclass(frozen=True)
+class _Choices:
+    """The values a ``Literal[...]`` field takes (``None`` too when optional)."""
+
+    values: tuple[Any, ...]
+    optional: bool = False
+
+    def check(self, owner: str, name: str, value: object, label: str | None = None) -> None:
+        if value is None and self.optional:
+            return
+        if not any(value == v and type(value) is type(v) for v in self.values):
+            shown = ", ".join(repr(v) for v in self.values)
+            raise ConfigError(
+                expect(label or f"{owner}.{name}", f"one of {shown}", value, "pick one of them")
+            )
+
+
+def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | _Choices | None:
+    """The bounds (or, for a ``Literal``, the choices) of one field from its resolved type
+    hint, or ``None`` if it declares none."""
     hint, optional = _without_none(hint)
+    if typing.get_origin(hint) is typing.Literal:
+        return _Choices(typing.get_args(hint), optional)
     if typing.get_origin(hint) is not Annotated:
         return None
     base, *metadata = typing.get_args(hint)
@@ -162,11 +183,12 @@ def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | None:
     return _Bounds(integer=base is int, optional=optional or none_inside, **kw)
 
 
-_BOUNDS: dict[type, tuple[tuple[str, _Bounds], ...]] = {}
+_BOUNDS: dict[type, tuple[tuple[str, _Bounds | _Choices], ...]] = {}
 
 
-def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds], ...]:
-    """``(field name, bounds)`` of every bounded field of a config class (resolved once)."""
+def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds | _Choices], ...]:
+    """``(field name, bounds or choices)`` of every bounded or ``Literal`` field of a config
+    class (resolved once)."""
     if cls in _BOUNDS:
         return _BOUNDS[cls]
     hints = typing.get_type_hints(cls, include_extras=True)

@@ -87,16 +87,7 @@ class LidarConfig(Config):
     noise_std: float = 0.0  # [m] Gaussian range noise (0 = off)
     sector_layout: SectorLayout = "centred"  # sector 0 centred on the heading (module doc)
 
-    def __post_init__(self) -> None:
-        if self.sector_layout not in SECTOR_LAYOUTS:
-            raise ConfigError(
-                expect(
-                    "LidarConfig.sector_layout",
-                    f"one of {SECTOR_LAYOUTS}",
-                    self.sector_layout,
-                    'use "centred" (mirror-true) or "heading_first" (the earlier layout)',
-                )
-            )
+    def __post_init__(self) -> None:  # sector_layout: a Literal, checked by Config
         check_positive("LidarConfig", "max_range", self.max_range)
         check_nonnegative("LidarConfig", "noise_std", self.noise_std)
         if self.n_beams <= 0 or self.group_size <= 0 or self.n_beams % self.group_size:

@@ -31,10 +31,10 @@ from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
-from pioneer.learn.models import KINDS
+from pioneer.learn.models import KINDS, StudentKind
 
 if TYPE_CHECKING:
-    Student: TypeAlias = str
+    Student: TypeAlias = StudentKind
     ActionMode: TypeAlias = str
     LabelPrev: TypeAlias = str
     Expert: TypeAlias = str

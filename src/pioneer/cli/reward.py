@@ -16,13 +16,14 @@ from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json
 from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import INDUCING, DensityConfig
+from pioneer.reward.density import Inducing as DensityInducing
 from pioneer.reward.features import FEATURE_MAPS
 
 if TYPE_CHECKING:
     from pioneer.reward.density import DensityReward
 
     Features: TypeAlias = str
-    Inducing: TypeAlias = str
+    Inducing: TypeAlias = DensityInducing
 else:
     Features = one_of(FEATURE_MAPS)
     Inducing = one_of(INDUCING)

@@ -21,14 +21,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping
-from typing import Any, Literal, NamedTuple
+from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
+from annotated_types import Interval
 from numpy.typing import NDArray
 
 from pioneer.config import Config
 from pioneer.control.rollout import Rollout, rollout
-from pioneer.errors import ConfigError, expect
 from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
@@ -45,6 +45,8 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 ExtraScore = Callable[[Rollout, State, World], F64]
+HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the people
+Fallback = Literal["stop", "evade"]  # what the teacher does when no candidate is feasible
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,12 +58,12 @@ class TeacherConfig(Config):
     omega_max: float = OMEGA_MAX  # [rad/s]
     horizon: float = 3.0  # [s] T
     dt: float = 0.3  # [s] rollout step Δt
-    human_model: str = "privileged"  # or "constant_velocity"
-    smoothing: float = 0.5  # α_EMA
+    human_model: HumanModel = "privileged"
+    smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: float = 0.0  # [m] predicted human clearance below this is infeasible
     # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
     # predicted to collide too, then drive the candidate that collides latest.
-    fallback: Literal["stop", "evade"] = "evade"
+    fallback: Fallback = "evade"
     weights: RuleWeights = RuleWeights()
 
     def candidates(self) -> F64:
@@ -70,16 +72,6 @@ class TeacherConfig(Config):
         w = np.linspace(-self.omega_max, self.omega_max, self.n_omega)
         vv, ww = np.meshgrid(np.asarray(self.v_values, dtype=np.float64), w, indexing="ij")
         return np.stack([vv.ravel(), ww.ravel()], axis=1)
-
-    def __post_init__(self) -> None:
-        if self.fallback not in ("stop", "evade"):
-            raise ConfigError(
-                expect("TeacherConfig.fallback", "'stop' or 'evade'", self.fallback, "pick one")
-            )
-        if not 0.0 < self.smoothing <= 1.0:
-            raise ConfigError(
-                expect("TeacherConfig.smoothing", "in (0, 1]", self.smoothing, "use 0.5")
-            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,8 +229,8 @@ def make_teacher(
     density: bool = True,
     goal: bool = True,
     obstacle: bool = True,
-    human_model: str = "privileged",
-    fallback: str = TeacherConfig.fallback,
+    human_model: HumanModel = "privileged",
+    fallback: Fallback = "evade",
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
@@ -254,7 +246,7 @@ def make_teacher(
     features = str(model.info_.get("features", default_features(scenario))) if model else "xy"
     cfg = TeacherConfig(
         human_model=human_model,
-        fallback=fallback,  # type: ignore[arg-type]  # checked by TeacherConfig
+        fallback=fallback,
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)

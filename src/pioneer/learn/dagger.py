@@ -68,10 +68,10 @@ from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
-    KINDS,
     MDN,
     Student,
     StudentConfig,
+    StudentKind,
     build_student,
     load_student,
     save_student,
@@ -97,7 +97,7 @@ class DaggerConfig(Config):
     """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
     scenario: str = "hr-rl"
-    student: str = "mdn"  # "mdn" | "mlp"
+    student: StudentKind = "mdn"
     action_mode: str = "mode"  # MDN's deterministic action in rollouts and checkpoint
     nll_beta: float = 0.0  # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
     # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
@@ -115,8 +115,6 @@ class DaggerConfig(Config):
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.student not in KINDS:
-            raise ConfigError(expect("student", f"one of {KINDS}", self.student, "pick one"))
         if self.action_mode not in ACTION_MODES:
             raise ConfigError(
                 expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")

@@ -32,9 +32,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -69,7 +70,8 @@ __all__ = [
 
 ACTION_DIM = 2  # (v [m/s], ω [rad/s])
 CHECKPOINT_FORMAT = "pioneer.student/1"
-KINDS = ("mdn", "mlp")
+StudentKind = Literal["mdn", "mlp"]
+KINDS: tuple[str, ...] = typing.get_args(StudentKind)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import typing
 from pathlib import Path
-from typing import Annotated, Any, Self
+from typing import Annotated, Any, Literal, Self
 
 import numpy as np
 import scipy.linalg
@@ -47,7 +48,8 @@ __all__ = [
 F64 = NDArray[np.float64]
 FORMAT = "pioneer.density_reward/1"
 _CHUNK = 4096
-INDUCING = ("kmeans", "fps")  # how a subset of inducing points is chosen
+Inducing = Literal["kmeans", "fps"]  # how a subset of inducing points is chosen
+INDUCING: tuple[str, ...] = typing.get_args(Inducing)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,16 +62,10 @@ class DensityConfig(Config):
     lam: Positive = 1e-2  # λ, weight of the RKHS-norm regulariser
     beta: Positive = 1e-3  # β, weight of the coefficient-norm regulariser
     max_inducing: Annotated[int, Ge(1)] = 2000  # more demos: choose a subset as inducing points
-    inducing: str = "kmeans"  # "kmeans" (medoids) or "fps" (farthest-point sampling)
+    inducing: Inducing = "kmeans"  # "kmeans" (medoids) or "fps" (farthest-point sampling)
     jitter: Positive = 1e-8  # first diagonal jitter tried if the Cholesky factorisation fails
     standardize: bool = True  # z-score features with the training statistics
     seed: int = 0  # for k-means / FPS / the length-scale subsample
-
-    def __post_init__(self) -> None:
-        if self.inducing not in INDUCING:
-            raise ConfigError(
-                expect("DensityConfig.inducing", f"one of {INDUCING}", self.inducing, "pick one")
-            )
 
 
 def farthest_point_indices(z: F64, k: int, rng: np.random.Generator) -> NDArray[np.int64]:

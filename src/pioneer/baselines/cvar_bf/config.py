@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,7 +42,9 @@ class CvarBfConfig(Config):
     slow_distance: float = 0.5  # [m] nominal slows down linearly inside this goal distance
     fallback_omega: float = 0.5  # [rad/s] |ω| bound of the turn-in-place fallback
     feasibility_tol: float = 1e-5  # accepted constraint violation of a solve [m²]
-    solver: str = "exact"  # QP solver: "exact" (cutting planes, exact 2-D QPs), "osqp" (the
+    solver: Literal["exact", "osqp", "slsqp"] = (
+        "exact"  # QP solver: "exact" (cutting planes, exact 2-D QPs), "osqp" (the
+    )
     # same cutting planes, OSQP on each 2-D QP) or "slsqp" (SciPy on the lifted QP; ~100× slower)
     max_iter: int = 2000  # iteration limit per solve (OSQP ADMM iterations / SLSQP steps)
     max_rounds: int = 20  # cutting-plane rounds (OSQP calls) per β level at most
@@ -80,12 +83,6 @@ class CvarBfConfig(Config):
         if not isinstance(self.n_samples, int) or self.n_samples < 1:
             raise ConfigError(
                 expect("CvarBfConfig.n_samples", "an integer >= 1", self.n_samples, "use 15")
-            )
-        if self.solver not in ("exact", "osqp", "slsqp"):
-            raise ConfigError(
-                expect(
-                    "CvarBfConfig.solver", "'exact', 'osqp' or 'slsqp'", self.solver, "use 'exact'"
-                )
             )
         if not isinstance(self.refine, int) or self.refine < 0:
             raise ConfigError(
