@@ -26,17 +26,19 @@ from pioneer.cli._common import (
     require_some,
 )
 from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.deploy.mixture import ActionMode as DaggerActionMode
 from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
+from pioneer.learn.dagger import LabelPrev as DaggerLabelPrev
 from pioneer.learn.models import KINDS, StudentKind
 
 if TYPE_CHECKING:
     Student: TypeAlias = StudentKind
-    ActionMode: TypeAlias = str
-    LabelPrev: TypeAlias = str
+    ActionMode: TypeAlias = DaggerActionMode
+    LabelPrev: TypeAlias = DaggerLabelPrev
     Expert: TypeAlias = str
     UnseenRule: TypeAlias = str
 else:

@@ -14,14 +14,18 @@ into
 
 from __future__ import annotations
 
+import typing
+from typing import Literal
+
 import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["ACTION_MODES", "mixture_action", "mixture_uncertainty", "softmax"]
+__all__ = ["ACTION_MODES", "ActionMode", "mixture_action", "mixture_uncertainty", "softmax"]
 
-ACTION_MODES = ("mode", "mean")
+ActionMode = Literal["mode", "mean"]  # the MDN's deterministic action: the mixture's mode or mean
+ACTION_MODES: tuple[str, ...] = typing.get_args(ActionMode)
 
 
 def softmax(logits: NDArray[np.floating]) -> NDArray[np.float64]:

@@ -41,18 +41,21 @@ import fnmatch
 import io
 import json
 import math
+import typing
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import torch
+from annotated_types import Ge, Interval
 from numpy.typing import NDArray
 
+from pioneer.bounds import Positive
 from pioneer.config import Config
 from pioneer.data import base_scenario
-from pioneer.deploy.mixture import ACTION_MODES
+from pioneer.deploy.mixture import ActionMode
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import kept
 from pioneer.io import (
@@ -89,7 +92,8 @@ FINAL_FILE = "student.safetensors"
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
 
 
-LABEL_PREV = ("applied", "teacher")
+LabelPrev = Literal["applied", "teacher"]
+LABEL_PREV: tuple[str, ...] = typing.get_args(LabelPrev)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,43 +102,22 @@ class DaggerConfig(Config):
 
     scenario: str = "hr-rl"
     student: StudentKind = "mdn"
-    action_mode: str = "mode"  # MDN's deterministic action in rollouts and checkpoint
-    nll_beta: float = 0.0  # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
+    action_mode: ActionMode = "mode"  # MDN's deterministic action in rollouts and checkpoint
+    # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
+    nll_beta: Annotated[float, Interval(ge=0.0, le=1.0)] = 0.0
     # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
     # command the robot actually ran) or "teacher" (the teacher's own previous label along the
     # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
     # labels). Equal on teacher-driven steps.
-    label_prev: str = "applied"
-    teacher_episodes: int = 50  # round 0, driven by the teacher
-    rounds: int = 10  # student-driven rounds after round 0
-    episodes_per_round: int = 50
-    epochs_initial: int = 40  # training epochs after round 0 (fresh network)
-    epochs_per_round: int = 10  # epochs over the aggregate after each later round (warm start)
-    batch: int = 256
-    lr: float = 1e-3
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.action_mode not in ACTION_MODES:
-            raise ConfigError(
-                expect("action_mode", f"one of {ACTION_MODES}", self.action_mode, "use 'mode'")
-            )
-        for name in ("teacher_episodes", "episodes_per_round", "epochs_initial", "batch"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise ConfigError(expect(name, "an integer >= 1", v, f"set {name} >= 1"))
-        for name in ("rounds", "epochs_per_round", "seed"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 0):
-                raise ConfigError(expect(name, "an integer >= 0", v, f"set {name} >= 0"))
-        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
-            raise ConfigError(expect("nll_beta", "a number in [0, 1]", self.nll_beta, "use 1.0"))
-        if self.label_prev not in LABEL_PREV:
-            raise ConfigError(
-                expect("label_prev", f"one of {LABEL_PREV}", self.label_prev, "use 'applied'")
-            )
-        if not (math.isfinite(self.lr) and self.lr > 0):
-            raise ConfigError(expect("lr", "a finite number > 0", self.lr, "use 1e-3"))
+    label_prev: LabelPrev = "applied"
+    teacher_episodes: Annotated[int, Ge(1)] = 50  # round 0, driven by the teacher
+    rounds: Annotated[int, Ge(0)] = 10  # student-driven rounds after round 0
+    episodes_per_round: Annotated[int, Ge(1)] = 50
+    epochs_initial: Annotated[int, Ge(1)] = 40  # training epochs after round 0 (fresh network)
+    epochs_per_round: Annotated[int, Ge(0)] = 10  # epochs over the aggregate after each later round
+    batch: Annotated[int, Ge(1)] = 256
+    lr: Positive = 1e-3
+    seed: Annotated[int, Ge(0)] = 0
 
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
@@ -376,7 +359,7 @@ def _round_tasks(
         name = _episode_scenario(cfg, names, rnd, i)
         seed = dagger_seed(cfg.scenario, cfg.seed, rnd, i)
         path = str(_episode_path(out, rnd, i))
-        tasks.append((name, str(rewards[name]), prev_ckpt, seed, path, cfg.label_prev))
+        tasks.append((name, str(rewards[name]), prev_ckpt, seed, path, str(cfg.label_prev)))
     return tasks
 
 
