@@ -10,7 +10,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from pioneer.control.policy import Policy
 
 from benchmarks.common import (
     SCENARIO,
@@ -23,6 +22,7 @@ from benchmarks.common import (
     sgemm_256_case,
     time_cases,
 )
+from pioneer.envs.policy import Policy
 
 
 def _density_data(n: int, d: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
