@@ -21,7 +21,7 @@ from pioneer.cli import main
 from pioneer.data import DEMOS_DIR, STUDENTS_DIR
 from pioneer.errors import DataError
 from pioneer.io import check_regular_target, output_dir_kind
-from pioneer_testutils import file_tree
+from pioneer_testutils import file_tree, one_error_line
 
 STATIC_DEMOS = str(DEMOS_DIR / "static.npz")
 STUDENT = str(STUDENTS_DIR / "hr-rl-compact-mdn.safetensors")
@@ -61,19 +61,7 @@ def argv(name: str, out: str | Path) -> list[str]:
 
 
 def _one_error_line(capsys: pytest.CaptureFixture[str], code: int, *needles: str) -> str:
-    return _check_error(capsys.readouterr().err, code, *needles)
-
-
-def _check_error(err: str, code: int, *needles: str) -> str:
-    """Exit 2 and one error line, the last (progress bars of work done before may precede
-    it), with no traceback."""
-    assert code == 2, err[-2000:]
-    lines = err.strip().splitlines()
-    errors = [line for line in lines if line.startswith("pioneer: error: ")]
-    assert len(errors) == 1 and lines[-1] == errors[0] and "Traceback" not in err, err[-2000:]
-    for needle in needles:
-        assert needle in errors[0], (needle, errors[0])
-    return errors[0]
+    return one_error_line(capsys.readouterr().err, code, *needles)
 
 
 def _faulty_path(fault: str, kind: str, tmp: Path) -> tuple[str, str]:
@@ -176,7 +164,7 @@ def test_full_disk_is_one_line_and_leaves_no_partial_file(name, tmp_path):
         cwd=tmp_path,
         preexec_fn=limit,
     )
-    _check_error(proc.stderr, proc.returncode, "File too large", str(target.parent))
+    one_error_line(proc.stderr, proc.returncode, "File too large", str(target.parent))
     if kind == "file":
         assert list((tmp_path / "full").iterdir()) == []  # no temporary file, no torn output
     else:  # a folder may exist; every file in it is whole (the run resumes from it)

@@ -39,6 +39,9 @@ from pioneer.sim.world import State, World, observe, step
 
 __all__ = ["NavVectorEnv"]
 
+# Event code → its label (None while an episode goes on), indexed by the int8 codes at once.
+_LABELS = np.array([e.label for e in Event], dtype=object)
+
 F32 = NDArray[np.float32]
 
 
@@ -148,7 +151,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         self, state: State, event: NDArray[np.int8], rewards: dict[str, NDArray[np.float64]]
     ) -> dict[str, Any]:
         return {
-            "event": np.array([Event(int(c)).label for c in event], dtype=object),
+            "event": _LABELS[event],
             "event_code": event,
             "robot_pose": state.robot.copy(),
             "goal": state.goal.copy(),
