@@ -48,7 +48,7 @@ def test_no_collision_with_the_static_human(name: str) -> None:
     for seed in range(5):
         rec, _ = run_episode("static", pol, seed)
         assert rec.event != "collision", (name, seed, rec)
-        assert rec.min_clearance_m > 0.0
+        assert rec.min_gap_m > 0.0
         events.append(rec.event)
     if name == "sfm":
         assert events == ["success"] * 5
@@ -117,7 +117,7 @@ def test_dwa_slows_down_for_a_person_ahead() -> None:
         robot=(0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (1.2, 0.0), "status": ARRIVED}]
     )
     state.command[0] = (0.8, 0.0)
-    u = DWAPolicy().decide(world, state)
+    u = DWAPolicy().decide(world, state).command
     assert u[0] < 0.8  # cannot keep full speed toward a body 0.3 m away
 
 
@@ -148,6 +148,6 @@ def test_sfm_heads_around_a_person() -> None:
         robot=(0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (1.3, 0.2), "status": ARRIVED}]
     )
     state.command[0] = (0.6, 0.0)
-    v, w = SocialForceRobotPolicy().decide(world, state)
+    v, w = SocialForceRobotPolicy().decide(world, state).command
     assert w < 0.0  # turns right, away from the person slightly to the left
     assert 0.0 <= v <= 0.8

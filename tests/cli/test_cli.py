@@ -114,5 +114,5 @@ def test_run_prints_a_short_record_and_frames_only_on_request(capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     frames = [json.loads(x) for x in lines[:-1]]
     assert len(frames) == record["steps"] + 1 and json.loads(lines[-1]) == record
-    assert set(frames[0]) == {"t", "x", "y", "theta", "v", "omega", "clearance", "wall_clearance"}
+    assert set(frames[0]) == {"t", "x", "y", "theta", "v", "omega", "gap", "wall_gap"}
     assert [f["t"] for f in frames[:3]] == pytest.approx([0.0, 0.1, 0.2])

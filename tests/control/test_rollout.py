@@ -74,7 +74,7 @@ def test_rollout_has_ten_states_of_every_candidate():
     assert ro.robot.shape == (120, 10, 3)
     assert ro.obs.shape == (120, 10, world.sim.lidar.obs_dim) == (120, 10, 29)
     assert ro.obs.dtype == np.float32
-    assert ro.collided.shape == ro.min_clearance.shape == ro.min_wall_clearance.shape == (120,)
+    assert ro.collided.shape == ro.min_gap.shape == ro.min_wall_gap.shape == (120,)
     assert ro.final.batch_size == 120
     np.testing.assert_allclose(ro.final.t, 3.0, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(ro.commands, cands)
@@ -90,8 +90,8 @@ def test_rollout_poses_are_exact_unicycle_arcs_in_an_empty_world():
     cands = TeacherConfig().candidates()
     ro = rollout(world, state, cands)
     assert not ro.collided.any()
-    assert np.all(np.isinf(ro.min_clearance))  # no humans at all
-    assert np.all(np.isinf(ro.min_wall_clearance))  # no walls at all
+    assert np.all(np.isinf(ro.min_gap))  # no humans at all
+    assert np.all(np.isinf(ro.min_wall_gap))  # no walls at all
     for c, (v, w) in enumerate(cands):
         for k in range(10):
             x, y, th = _unicycle_reference(pose, v, w, 0.3 * (k + 1))
@@ -130,7 +130,7 @@ def test_rollout_is_deterministic_and_does_not_touch_its_input():
     np.testing.assert_array_equal(a.robot, b.robot)
     np.testing.assert_array_equal(a.obs, b.obs)
     np.testing.assert_array_equal(a.collided, b.collided)
-    np.testing.assert_array_equal(a.min_clearance, b.min_clearance)
+    np.testing.assert_array_equal(a.min_gap, b.min_gap)
 
 
 def test_rollout_refuses_a_batch_and_an_unknown_human_model():
@@ -189,7 +189,7 @@ def test_constant_velocity_rollout_flags_an_overlap_at_the_horizon():
     ro = rollout(world, state, np.array([[0.1, 0.0]]), human_model="constant_velocity")
     gap = np.linalg.norm(ro.final.h_pos[0, 0] - ro.robot[0, -1, :2]) - R_ROBOT - 0.6
     assert gap < -0.1  # the predicted bodies overlap at the horizon ...
-    assert ro.min_clearance[0] <= gap + 1e-9  # ... so the clearance must say so
+    assert ro.min_gap[0] <= gap + 1e-9  # ... so the clearance must say so
     assert ro.collided[0]  # ... and the candidate must be infeasible
 
 

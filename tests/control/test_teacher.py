@@ -76,9 +76,9 @@ def test_teacher_drives_to_the_goal_in_a_room(humans, density, seed):
     straight = float(np.linalg.norm(info["goal"] - info["robot_pose"][:2]))
     assert straight - cfg.sim.goal_tolerance <= rec.path_length_m <= 1.25 * straight
     if humans:
-        assert rec.min_clearance_m > 0.5
+        assert rec.min_gap_m > 0.5
     else:
-        assert math.isinf(rec.min_clearance_m)
+        assert math.isinf(rec.min_gap_m)
 
 
 # --------------------------------------------------------------------------------------------
@@ -237,13 +237,13 @@ def test_safety_margin_bounds_the_predicted_clearance_of_the_choice(margin):
     plain = LookaheadTeacher(None)
     d0 = plain.decide(world, state)
     ro = _rollout_of(plain, world, state)
-    assert ro.min_clearance[d0.index] < margin, "without a margin the teacher cuts close"
+    assert ro.min_gap[d0.index] < margin, "without a margin the teacher cuts close"
     safe = LookaheadTeacher(None, config=TeacherConfig(safety_margin=margin))
     d = safe.decide(world, state)
     assert d.index >= 0
-    assert ro.min_clearance[d.index] >= margin
+    assert ro.min_gap[d.index] >= margin
     assert not ro.collided[d.index]
-    expected = int((~ro.collided & (ro.min_clearance >= margin)).sum())
+    expected = int((~ro.collided & (ro.min_gap >= margin)).sum())
     assert d.n_feasible == expected < d0.n_feasible
 
 
@@ -367,7 +367,7 @@ def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
         d = t.decide(world, state)
         ro = _rollout_of(t, world, state)
         c, n_l = ro.robot.shape[:2]
-        feasible = ~ro.collided & (ro.min_clearance >= t.config.safety_margin)
+        feasible = ~ro.collided & (ro.min_gap >= t.config.safety_margin)
         assert rows == ([int(feasible.sum()) * n_l] if feasible.any() else [])
         mixed += int(0 < feasible.sum() < c)
         # reference: the density of all candidates, then the feasibility mask

@@ -73,7 +73,7 @@ def decisions(name: str, seed: int) -> dict[str, np.ndarray]:
         scored = teacher.scores(world, state)
         ro = rollout(world, state, teacher.candidates, cfg.horizon, cfg.dt, cfg.human_model)
         out["clear_margin"].append(
-            float(np.min(np.abs(np.concatenate([ro.min_clearance, ro.min_wall_clearance]))))
+            float(np.min(np.abs(np.concatenate([ro.min_gap, ro.min_wall_gap]))))
         )
         finite = np.sort(scored[np.isfinite(scored)])
         i = int(np.argmax(scored)) if finite.size else -1

@@ -511,7 +511,7 @@ def test_shipped_datasets_match_their_readme(name):
     assert [int(row[0]), int(row[1]), int(row[2])] == [d.n_positive, d.n_negative, ep["episodes"]]
     assert float(row[3]) == pytest.approx(ep["time_mean_s"], abs=0.005)
     assert float(row[4]) == pytest.approx(ep["path_length_mean_m"], abs=0.005)
-    assert float(row[5]) == pytest.approx(ep["min_clearance_mean_m"], abs=0.0005)
+    assert float(row[5]) == pytest.approx(ep["min_gap_mean_m"], abs=0.0005)
     # and the statistics are those of the kept episodes in the file
     pos = d.select(d.gamma > 0)
     assert np.unique(pos.episode).size == ep["episodes"]

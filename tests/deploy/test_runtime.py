@@ -150,9 +150,9 @@ def test_commands_leave_clipped_to_the_robot_limits(onnx_path):
     obs = obs.astype(np.float32)
     for cfg in (RuntimeConfig(), RuntimeConfig(v_min=0.05, v_max=0.1, omega_max=0.05)):
         rt = StudentRuntime(onnx_path, config=cfg)
-        raw, _, _ = rt.decide_batch(obs)
+        raw, _, _ = rt.raw_outputs(obs)
         assert (raw[:, 0] < 0.0).any()  # the student does ask to reverse
-        got = np.array([[d.v, d.omega] for d in map(rt.decide, obs)])
+        got = np.array([[d.v, d.omega] for d in map(rt.from_observation, obs)])
         want = np.clip(raw, [cfg.v_min, -cfg.omega_max], [cfg.v_max, cfg.omega_max])
         np.testing.assert_array_equal(got, want.astype(np.float64))
         assert (got[:, 0] >= cfg.v_min).all() and (np.abs(got[:, 1]) <= cfg.omega_max).all()
@@ -186,7 +186,7 @@ def test_a_full_valid_scan_decides_as_before(rt):
         np.testing.assert_array_equal(
             observation_from_scan(r, -math.pi, INC, 10.0, GOAL, None, 0.1), before
         )
-        raw, ale, epi = rt.decide_batch(before[None])
+        raw, ale, epi = rt.raw_outputs(before[None])
         v = min(max(float(raw[0, 0]), V_MIN), V_MAX)
         assert (d.v, d.omega) == (v, float(raw[0, 1]))
         assert (d.aleatoric, d.epistemic) == (float(ale[0]), float(epi[0]))

@@ -182,9 +182,9 @@ def test_info_contents():
         "event",
         "robot_pose",
         "goal",
-        "min_clearance",
-        "episode_min_clearance",
-        "wall_clearance",
+        "min_gap",
+        "episode_min_gap",
+        "wall_gap",
         "time",
         "path_length",
         "rewards",
@@ -207,7 +207,7 @@ def test_info_contents():
     assert reward == pytest.approx(sum(info["rewards"].values()))
     assert info["time"] == pytest.approx(0.1)
     assert info["path_length"] == pytest.approx(0.04)
-    assert info["episode_min_clearance"] <= info["min_clearance"]
+    assert info["episode_min_gap"] <= info["min_gap"]
 
 
 def _static_without_human(env):
@@ -264,7 +264,7 @@ def test_collision_terminates():
     assert terminated is True
     assert info["event"] == "collision"
     assert info["rewards"]["collision"] == RewardConfig().collision
-    assert info["wall_clearance"] < 0
+    assert info["wall_gap"] < 0
 
 
 def test_policy_registry():
@@ -294,8 +294,8 @@ def test_run_episode_without_humans_reports_no_clearance():
     empty = cfg.replace(humans=())
     rec, _ = run_episode(empty, GoalPolicy(), seed=1)
     assert rec.event == "success"
-    assert rec.min_clearance_m == math.inf
-    assert rec.to_dict()["min_clearance_m"] is None
+    assert rec.min_gap_m == math.inf
+    assert rec.to_dict()["min_gap_m"] is None
 
 
 def test_the_environment_takes_its_reward_and_the_world_ends_the_episode():

@@ -78,8 +78,8 @@ def test_the_vector_env_reports_the_single_envs_info_copy_by_copy() -> None:
         sinfo = [e.step(a[i])[4] for i, e in enumerate(singles)]
         assert set(vinfo) == set(sinfo[0])
         for i, si in enumerate(sinfo):
-            for key in ("event", "event_code", "min_clearance", "episode_min_clearance",
-                        "wall_clearance", "time", "path_length"):  # fmt: skip
+            for key in ("event", "event_code", "min_gap", "episode_min_gap",
+                        "wall_gap", "time", "path_length"):  # fmt: skip
                 assert vinfo[key][i] == si[key], key
             np.testing.assert_array_equal(vinfo["robot_pose"][i], si["robot_pose"])
             np.testing.assert_array_equal(vinfo["goal"][i], si["goal"])

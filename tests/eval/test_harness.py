@@ -20,7 +20,7 @@ from pioneer.control.registry import build_policy
 from pioneer.control.teacher import make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError
-from pioneer.eval.episode import run_episode
+from pioneer.eval.episode import RECORD_FORMAT, run_episode
 from pioneer.eval.harness import (
     EPISODES_FILE,
     PolicySpec,
@@ -94,9 +94,9 @@ def test_episode_record_fields():
     assert d["event"] == "collision"
     assert d["steps"] > 0
     assert d["time_s"] == pytest.approx(0.1 * d["steps"])
-    assert d["min_clearance_m"] < 0.0  # a collision: negative swept clearance
+    assert d["min_gap_m"] < 0.0  # a collision: negative swept clearance
     assert d["collided_with"] == "human"  # the static study's goal runs into the crowd
-    assert 0.0 < d["min_wall_clearance_m"] < 5.0
+    assert 0.0 < d["min_wall_gap_m"] < 5.0
     assert 0.0 < d["time_close_s"] <= d["time_s"]
     json.dumps(d)  # JSON-serialisable
 
@@ -118,7 +118,7 @@ def test_a_wall_collision_says_wall():
     sc = sc.replace(robot_heading=(0.0, 0.0))  # facing +x: the lobby's side wall
     d = run_episode(sc, Straight(), 0)[0].to_dict()
     assert d["event"] == "collision" and d["collided_with"] == "wall"
-    assert d["min_wall_clearance_m"] < 0.0 and d["min_clearance_m"] is None
+    assert d["min_wall_gap_m"] < 0.0 and d["min_gap_m"] is None
 
 
 # --------------------------------------------------------------------------------------------
@@ -336,7 +336,14 @@ def test_a_torn_last_line_is_dropped_with_a_warning_and_rerun(tmp_path, capsys):
 
 def test_read_records_drops_a_torn_line_and_keeps_the_file_line_aligned(tmp_path, capsys):
     path = tmp_path / EPISODES_FILE
-    good = {"scenario": "static", "policy": "goal", "seed": 0, "trial": 0, "event": "collision"}
+    good = {
+        "scenario": "static",
+        "policy": "goal",
+        "seed": 0,
+        "trial": 0,
+        "event": "collision",
+        "format": RECORD_FORMAT,
+    }
     path.write_text(json.dumps(good) + "\n" + '{"scenario": "sta')
     assert read_records(path) == [good]
     assert "unfinished last line" in capsys.readouterr().err

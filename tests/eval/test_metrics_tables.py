@@ -27,7 +27,7 @@ def _rec(seed, trial, event, time_s, path, clear=0.5, close=0.0, scenario="hr-rl
         "event": event,
         "time_s": time_s,
         "path_length_m": path,
-        "min_clearance_m": clear,
+        "min_gap_m": clear,
         "time_close_s": close,
         "steps": round(time_s * 10),
     }
@@ -52,7 +52,7 @@ PER_SEED = {
     "path_length_mean_m": [4.5, 6.0],
     "time_mean_all_s": [13.75, 8.0, 30.0],
     "path_length_mean_all_m": [4.0, 3.25, 7.5],
-    "min_clearance_m": [0.7 / 3, 0.25, 1.1],
+    "min_gap_m": [0.7 / 3, 0.25, 1.1],
     "time_close_s": [0.875, 0.75, 0.0],
 }
 
@@ -178,7 +178,7 @@ def test_markdown_table_shows_the_paper_numbers_beside_ours():
     assert "99.4 / 12.24 / 3.74" in teacher
     # 3 seeds: t over seeds; 33.3 ± 71.7 would leave 0–100 %, so it is printed clipped
     assert "| 33.3 [0.0, 100.0] |" in teacher
-    mc = s["min_clearance_m"]  # may be negative: never clipped, printed ± as over seeds
+    mc = s["min_gap_m"]  # may be negative: never clipped, printed ± as over seeds
     assert f"| {mc['mean']:.2f} ± {mc['ci95']:.2f} |" in teacher
     assert "| 12.50 [0.00, " in teacher  # TT over 2 seeds with successes, clipped at 0
     assert teacher.rstrip(" |").endswith("8")  # episodes

@@ -31,7 +31,8 @@ from pioneer_testutils import assert_house_message
 torch.set_num_threads(1)
 
 PROP = settings(max_examples=80, deadline=None)
-KEYS = ("clearance", "aleatoric", "epistemic")
+KEYS = ("clearance", "aleatoric", "epistemic")  # a test record's frame series
+ARRAYS = ("distance", "aleatoric", "epistemic")  # frame_arrays' columns
 
 
 # ------------------------------------------------------------------------------ oracle
@@ -163,7 +164,7 @@ def test_frames_without_uncertainty_are_dropped():
         if k not in ("threshold_m", "measure", "frames_safe", "frames_risky")
     )
     arrays = frame_arrays([_rec([None, 0.5], [None, 0.1], [0.2, None])])
-    np.testing.assert_array_equal(arrays["clearance"], [math.inf, 0.5])
+    np.testing.assert_array_equal(arrays["distance"], [math.inf, 0.5])
     np.testing.assert_array_equal(arrays["aleatoric"], [math.nan, 0.1])
     np.testing.assert_array_equal(arrays["epistemic"], [0.2, math.nan])
 
@@ -171,7 +172,7 @@ def test_frames_without_uncertainty_are_dropped():
 def test_empty_input():
     got = safe_risky([])
     assert (got["frames_safe"], got["frames_risky"]) == (0, 0)
-    assert {k: v.size for k, v in frame_arrays([]).items()} == dict.fromkeys(KEYS, 0)
+    assert {k: v.size for k, v in frame_arrays([]).items()} == dict.fromkeys(ARRAYS, 0)
 
 
 @pytest.mark.parametrize("short", KEYS)
@@ -184,21 +185,22 @@ def test_unequal_series_are_a_data_error(short):
     assert_house_message(str(err.value), "frames", "17")
 
 
-def test_the_surface_measure_thresholds_the_surface_series():
-    # the paper's clearance (centre → surface) is the gap + r_r: a 0.6 m gap is risky there
-    rec = _rec([0.6, 1.2], [0.4, 0.1], [0.5, 0.2])
-    rec["frames"]["surface"] = [0.9, 1.5]  # r_r = 0.3 m
-    assert safe_risky([rec], 0.8)["frames_risky"] == 1  # by the gap
-    by_surface = safe_risky([rec], 0.8, "surface")
-    assert by_surface["frames_risky"] == 0 and by_surface["measure"] == "surface"
-    assert safe_risky([rec], 0.9, "surface")["frames_risky"] == 1
-    np.testing.assert_array_equal(frame_arrays([rec], "surface")["clearance"], [0.9, 1.5])
+def test_the_gap_measure_thresholds_the_gap_series():
+    # the paper's clearance (centre → surface) is the gap + r_r: a 0.6 m gap is risky by the
+    # gap, its 0.9 m clearance is safe
+    rec = _rec([0.9, 1.5], [0.4, 0.1], [0.5, 0.2])  # r_r = 0.3 m
+    rec["frames"]["gap"] = [0.6, 1.2]
+    assert safe_risky([rec], 0.8)["frames_risky"] == 0  # by the clearance (the default)
+    by_gap = safe_risky([rec], 0.8, "gap")
+    assert by_gap["frames_risky"] == 1 and by_gap["measure"] == "gap"
+    assert safe_risky([rec], 0.5, "gap")["frames_risky"] == 0
+    np.testing.assert_array_equal(frame_arrays([rec], "gap")["distance"], [0.6, 1.2])
 
 
 def test_records_without_the_asked_series_are_one_data_error():
     with pytest.raises(DataError) as err:
-        safe_risky([_rec([0.5], [0.1], [0.1])], 0.8, "surface")
-    assert_house_message(str(err.value), "'surface' series", "new --out")
+        safe_risky([_rec([0.5], [0.1], [0.1])], 0.8, "gap")
+    assert_house_message(str(err.value), "'gap' series", "new --out")
     with pytest.raises(DataError):
         frame_arrays([], "nope")
 
@@ -263,12 +265,12 @@ def _student(ckpt: Path) -> StudentPolicy:
 def test_run_episode_records_one_frame_per_step(ckpt):
     pol = _student(ckpt)
     rec, _ = run_episode("hr-rl", pol, seed=4)
-    assert rec.frames is not None and set(rec.frames) == {*KEYS, "surface"}
+    assert rec.frames is not None and set(rec.frames) == {*KEYS, "gap"}
     assert all(len(v) == rec.steps for v in rec.frames.values())
     _, info = NavEnv("hr-rl").reset(seed=4)
-    assert rec.frames["clearance"][0] == info["min_clearance"]  # the state of the first decision
+    assert rec.frames["gap"][0] == info["min_gap"]  # the state of the first decision
     r_r = get_scenario("hr-rl").sim.robot.radius
-    assert rec.frames["surface"] == [c + r_r for c in rec.frames["clearance"]]
+    assert rec.frames["clearance"] == [g + r_r for g in rec.frames["gap"]]
     assert rec.frames["aleatoric"] == [a for a, _ in pol.uncertainty]
     assert rec.frames["epistemic"] == [e for _, e in pol.uncertainty]
 
@@ -283,9 +285,9 @@ def test_frames_of_later_steps_are_the_clearance_before_each_decision(ckpt):
     rec, traj = run_episode("hr-rl", pol, seed=6, record=True)
     assert rec.frames is not None and traj is not None
     assert len(traj.states) == rec.steps + 1
-    # Frame t is the clearance of the state the t-th command was chosen in.
+    # Frame t is the gap of the state the t-th command was chosen in.
     for t in range(rec.steps):
-        assert rec.frames["clearance"][t] == float(traj.states[t].clearance[0])
+        assert rec.frames["gap"][t] == float(traj.states[t].gap[0])
 
 
 def test_no_human_gives_none_clearance_in_json_and_safe_frames(ckpt):
@@ -295,7 +297,7 @@ def test_no_human_gives_none_clearance_in_json_and_safe_frames(ckpt):
     rec, _ = run_episode(empty, _student(ckpt), seed=0)
     assert rec.frames is not None and rec.frames["clearance"] == [math.inf] * rec.steps
     d = rec.to_dict()
-    assert d["min_clearance_m"] is None and d["frames"]["clearance"] == [None] * rec.steps
+    assert d["min_gap_m"] is None and d["frames"]["clearance"] == [None] * rec.steps
     got = safe_risky([d])
     assert (got["frames_safe"], got["frames_risky"]) == (rec.steps, 0)
 
@@ -324,10 +326,10 @@ def test_records_keep_frames_through_the_harness(ckpt, tmp_path):
     assert back == json.loads(json.dumps(recs))
     by_policy = {p: [r for r in back if r["policy"] == p] for p in ("student-mdn", "goal")}
     for r in by_policy["student-mdn"]:
-        assert set(r["frames"]) == {*KEYS, "surface"}
+        assert set(r["frames"]) == {*KEYS, "gap"}
         assert all(len(v) == r["steps"] for v in r["frames"].values())
         _, info = NavEnv("hr-rl").reset(seed=episode_seed("hr-rl", 0, r["trial"]))
-        assert r["frames"]["clearance"][0] == float(f"{info['min_clearance']:.6g}")
+        assert r["frames"]["gap"][0] == float(f"{info['min_gap']:.6g}")
     assert all("frames" not in r for r in by_policy["goal"])
     got = safe_risky(back)
     assert got["frames_safe"] + got["frames_risky"] == sum(
@@ -349,7 +351,7 @@ def test_summarize_ignores_frames():
         "event": "success",
         "time_s": 10.0,
         "path_length_m": 4.0,
-        "min_clearance_m": 0.5,
+        "min_gap_m": 0.5,
         "time_close_s": 1.0,
         "steps": 3,
     }
@@ -371,7 +373,7 @@ def test_summarize_ignores_frames():
 def test_episode_record_without_frames_round_trips():
     rec = EpisodeRecord("hr-rl", "goal", 0, "timeout", 30.0, 5.0, math.inf, 0.0, 300)
     d = rec.to_dict()
-    assert "frames" not in d and d["min_clearance_m"] is None
+    assert "frames" not in d and d["min_gap_m"] is None
     with_frames = dataclasses.replace(
         rec, frames={"clearance": [math.inf, 0.1234567], "aleatoric": [math.nan, 1.0]}
     )

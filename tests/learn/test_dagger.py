@@ -61,7 +61,7 @@ EPISODE_KEYS = {
     "obs",
     "action",
     "applied",
-    "clearance",
+    "gap",
     "aleatoric",
     "epistemic",
     "event",
@@ -283,7 +283,7 @@ def test_episode_files_hold_labelled_frames(run_mdn):
         for key in ("action", "applied"):
             assert ep[key].shape == (n, 2) and ep[key].dtype == np.float32
             assert np.all(np.isfinite(ep[key]))
-        for key in ("clearance", "aleatoric", "epistemic"):
+        for key in ("gap", "aleatoric", "epistemic"):
             assert ep[key].shape == (n,)
         assert str(ep["event"]) in {"success", "collision", "timeout"}
         assert float(ep["time_s"]) == pytest.approx(0.1 * n)
@@ -332,7 +332,7 @@ def test_student_round_labels_are_the_teachers_decisions_from_the_applied_comman
     teacher.reset(info, np.random.default_rng(0))
     for t in range(len(ep["obs"])):
         np.testing.assert_array_equal(ep["obs"][t], obs)
-        assert ep["clearance"][t] == info["min_clearance"]
+        assert ep["gap"][t] == info["min_gap"]
         state = info["state"]
         label = teacher.decide(info["world"], state, prev=state.command[0]).command
         np.testing.assert_allclose(ep["action"][t], label, rtol=0, atol=1e-6)
@@ -375,7 +375,7 @@ def test_two_workers_collect_the_same_episodes(run_mdn, reward_file, tmp_path):
         if name.startswith("rounds/round-00"):  # the teacher drives: bit for bit
             for key, arr in ep.items():
                 np.testing.assert_array_equal(arr, other[key], err_msg=f"{name}:{key}")
-        for key in ("obs", "action", "applied", "clearance", "aleatoric", "epistemic"):
+        for key in ("obs", "action", "applied", "gap", "aleatoric", "epistemic"):
             np.testing.assert_allclose(
                 ep[key], other[key], rtol=1e-5, atol=1e-6, err_msg=f"{name}:{key}"
             )

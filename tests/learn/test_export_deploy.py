@@ -113,7 +113,7 @@ def test_onnx_graph_has_dynamic_batch_and_metadata(students, demo_obs):
     assert [o.name for o in proto.graph.output] == list(MDN_OUTPUTS)
     rt = StudentRuntime(path)
     for n in (1, 7, 300):
-        a, ale, epi = rt.decide_batch(demo_obs[:n])
+        a, ale, epi = rt.raw_outputs(demo_obs[:n])
         assert a.shape == (n, 2) and ale.shape == (n,) and epi.shape == (n,)
     assert model.training is False
     with pytest.raises(ConfigError):
@@ -143,7 +143,7 @@ def test_runtime_outputs_agree_with_the_numpy_twin(students, demo_obs):
 def test_runtime_mlp_has_no_uncertainty(students, demo_obs):
     model, path = students["mlp"]
     rt = StudentRuntime(path)
-    d = rt.decide(demo_obs[0])
+    d = rt.from_observation(demo_obs[0])
     np.testing.assert_allclose([d.v, d.omega], torch_outputs(model, demo_obs[:1])[0][0], **TOL)
     assert math.isnan(d.aleatoric) and math.isnan(d.epistemic)
 
@@ -212,10 +212,10 @@ def test_runtime_refuses_bad_files_and_inputs(students, tmp_path):
 
     rt = StudentRuntime(students["mdn"][1])
     with pytest.raises(DataError) as err:
-        rt.decide(np.zeros(28))
+        rt.from_observation(np.zeros(28))
     assert_house_message(str(err.value), "obs")
     with pytest.raises(DataError) as err:
-        rt.decide(np.full(29, np.nan))
+        rt.from_observation(np.full(29, np.nan))
     assert_house_message(str(err.value), "finite")
     with pytest.raises(DataError):
         rt.step([1.0] * 10, 0.0, 0.1, 5.0, (math.nan, 0.0))

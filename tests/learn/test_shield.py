@@ -206,7 +206,7 @@ def test_a_teacher_shielded_episode_records_shielded_frames(ckpt, reward_file):
     rec, _ = run_episode(scenario, shield, seed=5)
     assert rec.policy == "student-shield" and rec.steps == 10
     assert rec.frames is not None
-    assert set(rec.frames) == {"clearance", "surface", "aleatoric", "epistemic", "shielded"}
+    assert set(rec.frames) == {"gap", "clearance", "aleatoric", "epistemic", "shielded"}
     assert all(len(v) == rec.steps for v in rec.frames.values())
     assert rec.frames["shielded"] == [1.0] * rec.steps
     assert rec.to_dict()["frames"]["shielded"] == [1.0] * rec.steps

@@ -149,7 +149,7 @@ def test_every_initial_state_is_collision_free_and_nobody_is_boxed_in(seed, name
     s = sample_state(sc, np.random.default_rng(seed))
     walls = np.asarray(sc.walls)
     gap = sc.min_start_gap
-    assert s.clearance[0] >= gap and s.wall_clearance[0] >= gap
+    assert s.gap[0] >= gap and s.wall_gap[0] >= gap
     for i in range(s.n_humans):
         for j in range(i):
             d = np.linalg.norm(s.h_pos[0, i] - s.h_pos[0, j]) - s.h_radius[0, i] - s.h_radius[0, j]

@@ -5,7 +5,7 @@ optimisation of the step kernel, the social-force model or the LiDAR that change
 trajectory fails here instead of silently changing every dataset, teacher label and result
 made with it. Continuous values are compared to 1e-9 (a different CPU's libm may differ in
 the last bits; over 25 steps that stays far below this), discrete ones exactly: a collision
-flag could only flip where a clearance lies within that tolerance of 0, and
+flag could only flip where a gap lies within that tolerance of 0, and
 ``test_discrete_outcomes_are_no_near_ties`` checks that none does (the closest is 3·10⁻⁴ m).
 
 Two references: ``regression.npz`` was made before the paper world existed and pins the
@@ -41,7 +41,7 @@ COMPACT = {"hr-rl": "hr-rl-compact", "hl-rr": "hl-rr-compact"}  # … their name
 PAPER = ("hr-rl", "hl-rr", "static")
 SEEDS = (0, 1, 2)
 N_COPIES, N_STEPS = 4, 25
-CONTINUOUS = ("robot", "h_pos", "h_vel", "clearance", "wall_clearance", "path_length", "obs")
+CONTINUOUS = ("robot", "h_pos", "h_vel", "gap", "wall_gap", "path_length", "obs")
 DISCRETE = ("collided", "reached", "h_status", "h_wp_index")
 
 
@@ -99,20 +99,18 @@ def test_the_reference_covers_humans_walls_and_collisions(reference):
     ]
     assert min(walked) > 0.0
     assert any(reference[f"{n}/{s}/collided"].any() for n in SCENARIOS for s in SEEDS)
-    assert any(
-        np.isfinite(reference[f"{n}/{s}/wall_clearance"]).all() for n in SCENARIOS for s in SEEDS
-    )
+    assert any(np.isfinite(reference[f"{n}/{s}/wall_gap"]).all() for n in SCENARIOS for s in SEEDS)
 
 
-NEAR_TIE = 1e-6  # [m] a clearance this close to 0 could flip a collision flag between CPUs
+NEAR_TIE = 1e-6  # [m] a gap this close to 0 could flip a collision flag between CPUs
 
 
 def test_discrete_outcomes_are_no_near_ties(reference, paper_reference):
-    """Every stored clearance is far from 0 compared with the continuous tolerance, so the
+    """Every stored gap is far from 0 compared with the continuous tolerance, so the
     collision flags are stable to last-bit differences and may be compared exactly."""
     for ref in (reference, paper_reference):
         for key, value in ref.items():
-            if key.endswith(("/clearance", "/wall_clearance")):
+            if key.endswith(("/gap", "/wall_gap")):
                 finite = value[np.isfinite(value)]
                 assert np.all(np.abs(finite) > NEAR_TIE), key
 

@@ -201,14 +201,14 @@ def test_straight_drive_into_wall_flags_collision_at_contact_step(distance):
     expected = math.floor((distance - R_ROBOT) / (v * dt)) + 1
     k, st = _first_collision(world, state, [v, 0.0], 100)
     assert k == expected
-    assert st.wall_clearance[0] < 0.0
-    assert st.wall_clearance[0] == pytest.approx(distance - R_ROBOT - v * dt * k, abs=1e-9)
+    assert st.wall_gap[0] < 0.0
+    assert st.wall_gap[0] == pytest.approx(distance - R_ROBOT - v * dt * k, abs=1e-9)
     # One step earlier the robot was clear.
     prev = state
     for _ in range(expected - 1):
         prev = step(world, prev, [v, 0.0])
     assert not prev.collided[0]
-    assert prev.wall_clearance[0] > 0.0
+    assert prev.wall_gap[0] > 0.0
 
 
 def test_straight_drive_into_static_human_flags_collision_at_contact_step():
@@ -222,7 +222,7 @@ def test_straight_drive_into_static_human_flags_collision_at_contact_step():
     expected = math.floor((2.0 - r_h - R_ROBOT) / (v * dt)) + 1
     k, st = _first_collision(world, state, [v, 0.0], 100)
     assert k == expected
-    assert st.clearance[0] == pytest.approx(2.0 - r_h - R_ROBOT - v * dt * k, abs=1e-9)
+    assert st.gap[0] == pytest.approx(2.0 - r_h - R_ROBOT - v * dt * k, abs=1e-9)
     assert np.array_equal(st.h_pos[0, 0], [0.0, 0.0])
     # Collision is sticky and the goal can no longer be reached.
     st = step(world, st, [0.0, 0.0])
@@ -246,7 +246,7 @@ def test_fast_pass_through_a_human_is_detected(max_substep):
     assert new.robot[0, 1] == pytest.approx(0.8)
     assert end_clearance > 0.3  # the end pose alone looks fine
     assert new.collided[0]
-    assert new.clearance[0] == pytest.approx(-(r_h + R_ROBOT), abs=1e-9)
+    assert new.gap[0] == pytest.approx(-(r_h + R_ROBOT), abs=1e-9)
 
 
 @pytest.mark.parametrize("max_substep", [0.1, 10.0])
@@ -260,7 +260,7 @@ def test_fast_pass_through_a_thin_wall_is_detected(max_substep):
     assert new.robot[0, 0] == pytest.approx(0.8)
     assert abs(new.robot[0, 0]) - R_ROBOT > 0.3
     assert new.collided[0]
-    assert new.wall_clearance[0] == pytest.approx(-R_ROBOT, abs=1e-9)
+    assert new.wall_gap[0] == pytest.approx(-R_ROBOT, abs=1e-9)
 
 
 def test_moving_human_crossing_the_robot_between_steps_is_detected():
@@ -293,12 +293,12 @@ def test_clearance_is_reported_without_collision():
         humans=[{"pos": (3.0, 0.0), "status": ARRIVED, "radius": 0.5}],
     )
     new = step(world, state, [0.0, 0.0])
-    assert new.clearance[0] == pytest.approx(3.0 - 0.5 - R_ROBOT)
-    assert new.wall_clearance[0] == math.inf  # no walls
+    assert new.gap[0] == pytest.approx(3.0 - 0.5 - R_ROBOT)
+    assert new.wall_gap[0] == math.inf  # no walls
     assert not new.collided[0]
     # Without humans the clearance is +inf.
     empty = step(world, make_state((0.0, 0.0, 0.0), goal=(9.0, 9.0)), [0.1, 0.0])
-    assert empty.clearance[0] == math.inf
+    assert empty.gap[0] == math.inf
 
 
 def test_gone_humans_are_ignored_by_collisions():
@@ -308,7 +308,7 @@ def test_gone_humans_are_ignored_by_collisions():
     )
     new = step(world, state, [0.5, 0.0])
     assert not new.collided[0]
-    assert new.clearance[0] == math.inf
+    assert new.gap[0] == math.inf
 
 
 def test_reaching_the_goal():
@@ -363,16 +363,16 @@ def test_swept_clearances_never_exceed_true_arc_clearances(
     arc = _arc_samples(x, y, th, v, w, dt)
     true_wall = float(wall_distances(arc, world.walls).min()) - R_ROBOT
     true_human = float(np.linalg.norm(arc - (hx, hy), axis=1).min()) - hr - R_ROBOT
-    assert new.wall_clearance[0] <= true_wall + 1e-9
-    assert new.clearance[0] <= true_human + 1e-9
+    assert new.wall_gap[0] <= true_wall + 1e-9
+    assert new.gap[0] <= true_human + 1e-9
     if true_wall < -1e-9 or true_human < -1e-9:
         assert new.collided[0]
     # Not absurdly pessimistic either: within the chord–arc sag of the truth.
     h = dt / max(1, math.ceil(dt / max_substep - 1e-9))
     sag = v * h * abs(w * h) / 8
     step_len = v * dt / 400
-    assert new.wall_clearance[0] >= true_wall - 2 * sag - step_len - 1e-9
-    assert new.clearance[0] >= true_human - 2 * sag - step_len - 1e-9
+    assert new.wall_gap[0] >= true_wall - 2 * sag - step_len - 1e-9
+    assert new.gap[0] >= true_human - 2 * sag - step_len - 1e-9
 
 
 def test_observe_states_equals_observing_each_state():
@@ -413,10 +413,8 @@ def test_advance_equals_repeated_steps_bit_for_bit(name):
     np.testing.assert_array_equal(tr.circles[..., :2], np.stack([x.h_pos for x in states], 1))
     gone = np.stack([x.h_status == GONE for x in states], axis=1)
     np.testing.assert_array_equal(tr.circles[..., 2] == 0.0, gone)
-    np.testing.assert_array_equal(tr.clearance, np.min([x.clearance for x in states], axis=0))
-    np.testing.assert_array_equal(
-        tr.wall_clearance, np.min([x.wall_clearance for x in states], axis=0)
-    )
+    np.testing.assert_array_equal(tr.gap, np.min([x.gap for x in states], axis=0))
+    np.testing.assert_array_equal(tr.wall_gap, np.min([x.wall_gap for x in states], axis=0))
     np.testing.assert_array_equal(
         tr.observations(world), observe_states(world, states).transpose(1, 0, 2)
     )
@@ -455,9 +453,7 @@ def test_advance_stops_colliding_copies_and_keeps_the_others_bit_for_bit():
         np.testing.assert_array_equal(tr.final.robot[b], end.robot[b])
         np.testing.assert_array_equal(tr.final.h_pos[b], end.h_pos[b])
         assert tr.final.collided[b] == hit[b, -1]
-        np.testing.assert_array_equal(
-            tr.clearance[b], np.min([x.clearance[b] for x in states[: kc + 1]])
-        )
+        np.testing.assert_array_equal(tr.gap[b], np.min([x.gap[b] for x in states[: kc + 1]]))
     # A copy collided from the start is never advanced.
     s1 = s0.copy()
     s1.collided[:] = True

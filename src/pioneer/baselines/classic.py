@@ -16,6 +16,7 @@ from annotated_types import Ge
 from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative, Positive
+from pioneer.envs.policy import Decision
 from pioneer.errors import ConfigError, expect
 from pioneer.limits import OMEGA_MAX, V_MAX
 from pioneer.sim.humans import GONE
@@ -156,7 +157,7 @@ class DWAPolicy:
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The best admissible command in the dynamic window."""
-        return self.decide(info["world"], info["state"])
+        return self.decide(info["world"], info["state"]).command
 
     def window(self, world: World, state: State) -> NDArray[np.float64]:
         """The sampled dynamic window, ``(n_v · n_omega, 2)`` commands."""
@@ -196,8 +197,11 @@ class DWAPolicy:
         n = np.ceil(v / dv - 1e-9)
         return dt * (n * v - dv * n * (n - 1) / 2.0)
 
-    def decide(self, world: World, state: State) -> NDArray[np.float64]:
-        """Score the window from ``state`` (B = 1)."""
+    def decide(
+        self, world: World, state: State, prev: NDArray[np.float64] | None = None
+    ) -> Decision:
+        """Score the window from ``state`` (B = 1); the current velocity is the state's last
+        command (``prev`` is not used)."""
         rob = world.sim.robot
         r_r = rob.radius
         cmds = self.window(world, state)
@@ -240,8 +244,8 @@ class DWAPolicy:
             w_lim = self.accel_omega * world.sim.dt
             w = float(np.clip(self.k_omega * phi_g, w0 - w_lim, w0 + w_lim))
             v = max(rob.v_min, v0 - self.accel_v * world.sim.dt)
-            return np.array([v, float(np.clip(w, -rob.omega_max, rob.omega_max))])
-        return cmds[int(np.argmax(np.where(admissible, score, -np.inf)))].copy()
+            return Decision(np.array([v, float(np.clip(w, -rob.omega_max, rob.omega_max))]))
+        return Decision(cmds[int(np.argmax(np.where(admissible, score, -np.inf)))].copy())
 
 
 # --------------------------------------------------------------------------------------------
@@ -295,7 +299,7 @@ class SocialForceRobotPolicy:
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """Heading control toward the social-force velocity."""
-        return self.decide(info["world"], info["state"])
+        return self.decide(info["world"], info["state"]).command
 
     def force(self, world: World, state: State) -> NDArray[np.float64]:
         """The social force on the robot ``(2,)`` [m/s²]."""
@@ -327,10 +331,13 @@ class SocialForceRobotPolicy:
             f = f + (mag[:, None] * diff / d[:, None]).sum(axis=0)
         return f
 
-    def decide(self, world: World, state: State) -> NDArray[np.float64]:
-        """One command from ``state`` (B = 1)."""
+    def decide(
+        self, world: World, state: State, prev: NDArray[np.float64] | None = None
+    ) -> Decision:
+        """One command from ``state`` (B = 1); the current velocity is the state's last
+        command (``prev`` is not used)."""
         rob = world.sim.robot
         th = float(state.robot[0, 2])
         v_r = state.command[0, 0] * np.array([math.cos(th), math.sin(th)])
         v_d = v_r + self.force(world, state) * world.sim.dt
-        return _heading_command(v_d, th, self.k_omega, rob.v_max, rob.omega_max)
+        return Decision(_heading_command(v_d, th, self.k_omega, rob.v_max, rob.omega_max))

@@ -36,7 +36,7 @@ class DemosGenerate:
     """keep successful episodes of at most this many seconds"""
     max_path: Annotated[float, metavar("M")] = Selection.max_path_m
     """… and at most this path length [m]"""
-    min_clearance: Annotated[float, metavar("M")] = Selection.min_clearance_m
+    min_gap: Annotated[float, metavar("M")] = Selection.min_gap_m
     """… that never came closer to a person than this [m]"""
 
     def run(self) -> int:
@@ -48,7 +48,7 @@ class DemosGenerate:
             seed=self.seed,
             command=command_line(),
             demonstrator=self.demonstrator,
-            selection=Selection(self.max_time, self.max_path, self.min_clearance),
+            selection=Selection(self.max_time, self.max_path, self.min_gap),
         )
         d.save(self.out)
         print(to_json({"out": self.out, **d.summary()}))

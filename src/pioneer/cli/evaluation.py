@@ -45,7 +45,7 @@ _PAPER = PROFILES["paper"]  # the paper's protocol: eval's default seeds × tria
 
 def _frame(s: State) -> dict[str, float]:
     """One frame of ``pioneer run --frames``: time [s], pose [m, m, rad], the last applied
-    command [m/s, rad/s] and the swept human and wall clearances of the last step [m]."""
+    command [m/s, rad/s] and the swept human and wall gaps of the last step [m]."""
     x, y, theta = (float(v) for v in s.robot[0])
     v, omega = (float(c) for c in s.command[0])
     return {
@@ -55,8 +55,8 @@ def _frame(s: State) -> dict[str, float]:
         "theta": theta,
         "v": v,
         "omega": omega,
-        "clearance": float(s.clearance[0]),
-        "wall_clearance": float(s.wall_clearance[0]),
+        "gap": float(s.gap[0]),
+        "wall_gap": float(s.wall_gap[0]),
     }
 
 
@@ -78,7 +78,7 @@ class Run:
     lidar: Flag = False
     """draw the LiDAR rays in the GIF"""
     frames: Flag = False
-    """print a JSON line of every frame (time, pose, command, clearances) before the record,
+    """print a JSON line of every frame (time, pose, command, gaps) before the record,
     and keep a student's per-frame uncertainty in the record"""
     ablation: Ablations = dataclasses.field(default_factory=Ablation)
 

@@ -44,8 +44,8 @@ class Rollout:
     commands: F64  # (C, 2)
     robot: F64  # (C, L, 3) poses x_1 … x_L (a colliding candidate stops: module docstring)
     collided: NDArray[np.bool_]  # (C,) a predicted collision (humans or walls)
-    min_clearance: F64  # (C,) minimum swept clearance to any human [m]
-    min_wall_clearance: F64  # (C,) minimum swept clearance to walls [m]
+    min_gap: F64  # (C,) minimum swept gap (surface to surface) to any human [m]
+    min_wall_gap: F64  # (C,) minimum swept gap to walls [m]
     final: State  # the C states at the horizon (a colliding candidate: at its collision)
     collision_step: NDArray[np.int64]  # (C,) 1-based step of the first collision (L + 1: none)
     observe: Callable[[NDArray[np.bool_] | None], NDArray[np.float32]] = dataclasses.field(
@@ -95,7 +95,7 @@ def rollout(
         tr = advance(world, s, commands, dt, n_steps, stop_at_collision=True)
         hit = tr.final.collided
         return Rollout(
-            commands, tr.poses, hit.copy(), tr.clearance, tr.wall_clearance, tr.final,
+            commands, tr.poses, hit.copy(), tr.gap, tr.wall_gap, tr.final,
             np.where(hit, tr.live_steps, n_steps + 1), functools.partial(tr.observations, world),
         )  # fmt: skip
     # Constant velocity: freeze the social-force model and move the humans along their current
@@ -114,13 +114,13 @@ def rollout(
             s.h_pos[moving] = (state.h_pos + v0 * (dt * (k + 1))).repeat(c, axis=0)[moving]
             gap = np.linalg.norm(s.h_pos - s.robot[:, None, :2], axis=2) - s.h_radius
             gap = np.where(moving, gap - world.sim.robot.radius, np.inf).min(axis=1)
-            np.minimum(s.clearance, gap, out=s.clearance)
+            np.minimum(s.gap, gap, out=s.gap)
             np.logical_or(s.collided, gap < 0.0, out=s.collided)
         robot[:, k] = s.robot
         first[s.collided & (first > n_steps)] = k + 1
         states.append(s)
-        np.minimum(clear, s.clearance, out=clear)
-        np.minimum(wclear, s.wall_clearance, out=wclear)
+        np.minimum(clear, s.gap, out=clear)
+        np.minimum(wclear, s.wall_gap, out=wclear)
     obs = np.ascontiguousarray(observe_states(world, states).transpose(1, 0, 2))  # (C, L, 29)
     return Rollout(
         commands, robot, s.collided.copy(), clear, wclear, s, first,

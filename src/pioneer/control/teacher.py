@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from pioneer.config import Config
 from pioneer.control.rollout import Rollout, rollout
+from pioneer.envs.policy import Decision
 from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
@@ -60,7 +61,7 @@ class TeacherConfig(Config):
     dt: float = 0.3  # [s] rollout step Δt
     human_model: HumanModel = "privileged"
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
-    safety_margin: float = 0.0  # [m] predicted human clearance below this is infeasible
+    safety_margin: float = 0.0  # [m] predicted human gap below this is infeasible
     # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Fallback = "evade"
@@ -75,10 +76,10 @@ class TeacherConfig(Config):
 
 
 @dataclasses.dataclass(frozen=True)
-class TeacherDecision:
-    """One teacher decision: the command and the per-term scores behind it."""
+class TeacherDecision(Decision):
+    """One teacher decision: the command (the smoothed command actually sent) and the per-term
+    scores behind it."""
 
-    command: F64  # (2,) the smoothed command actually sent
     best: F64  # (2,) u*, the best feasible candidate (zeros if none)
     index: int  # index of u* among the candidates (−1 if none feasible)
     n_feasible: int
@@ -185,7 +186,7 @@ class LookaheadTeacher:
         d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
         d_goal = ro.final_goal_distance
         r_goal = goal_term(d_goal, d_total)
-        feasible = ~ro.collided & (ro.min_clearance >= cfg.safety_margin)
+        feasible = ~ro.collided & (ro.min_gap >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
         # Only candidates that can be chosen are observed and scored by the density: about half
         # collide in the paper world, and the rays and the density are most of a decision's

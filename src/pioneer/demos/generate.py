@@ -6,7 +6,7 @@ Positives (γ = +1), by ``demonstrator``:
 - ``"teacher"`` (the default in the elevator): *efficient* successes of the rules-only
   teacher (goal and obstacle terms, no density: the paper's Table II "w/o R_den" row) — the
   episodes a skilled operator would drive, kept only when they end within ``max_time_s`` and
-  ``max_path_m`` and never come closer than ``min_clearance_m`` to a person (:class:`Selection`).
+  ``max_path_m`` and never come closer than ``min_gap_m`` to a person (:class:`Selection`).
   The density fitted on them pays for states and commands like theirs (docs/demonstrations.md
   says why these and not slower, courteous ones);
 - ``"courteous"``: successes of the scripted courteous driver (privileged: lets the exiting
@@ -61,22 +61,18 @@ class Selection:
 
     max_time_s: float = 14.0  # [s] episode time at most
     max_path_m: float = 4.3  # [m] path length at most
-    min_clearance_m: float = 0.0  # [m] closest approach to a person (centre → surface) at least
+    min_gap_m: float = 0.0  # [m] closest approach to a person (surface to surface) at least
 
-    def keeps(self, time_s: float, path_m: float, clearance_m: float) -> bool:
+    def keeps(self, time_s: float, path_m: float, gap_m: float) -> bool:
         """Whether a successful episode with these statistics is kept."""
-        return (
-            time_s <= self.max_time_s
-            and path_m <= self.max_path_m
-            and clearance_m >= self.min_clearance_m
-        )
+        return time_s <= self.max_time_s and path_m <= self.max_path_m and gap_m >= self.min_gap_m
 
 
 def record_episode(
     env: NavEnv, policy: Policy, seed: int
 ) -> tuple[list[Frame], str, dict[str, float]]:
     """Run one episode; return its frames (state–action pairs), the final event and the
-    episode's statistics (``time_s``, ``path_length_m``, ``min_clearance_m`` to people)."""
+    episode's statistics (``time_s``, ``path_length_m``, ``min_gap_m`` to people)."""
     frames: list[Frame] = []
 
     def keep(step: Step) -> None:
@@ -93,11 +89,11 @@ def record_episode(
 
     episode = Episode(env, policy, seed)
     info = episode.run(keep)
-    clear = float(info["episode_min_clearance"])
+    clear = float(info["episode_min_gap"])
     stats = {
         "time_s": float(info["time"]),
         "path_length_m": float(info["path_length"]),
-        "min_clearance_m": clear if math.isfinite(clear) else math.inf,
+        "min_gap_m": clear if math.isfinite(clear) else math.inf,
     }
     return frames, str(episode.event), stats
 
@@ -172,7 +168,7 @@ def generate(
                 break
             ep_seed = training_seed(seed + offset, k)
             frames, event, st = record_episode(env, make(k), ep_seed)
-            kept = static or select.keeps(st["time_s"], st["path_length_m"], st["min_clearance_m"])
+            kept = static or select.keeps(st["time_s"], st["path_length_m"], st["min_gap_m"])
             if gamma > 0 and event == "success" and kept:
                 stats.append(st)
                 n = add(frames, 1.0, ep_seed, want - got)
@@ -228,10 +224,10 @@ def _episode_stats(stats: list[dict[str, float]]) -> dict[str, float | int]:
     """The kept positive episodes' count and mean time, path length and closest approach."""
     if not stats:
         return {"episodes": 0}
-    clear = [s["min_clearance_m"] for s in stats if math.isfinite(s["min_clearance_m"])]
+    clear = [s["min_gap_m"] for s in stats if math.isfinite(s["min_gap_m"])]
     return {
         "episodes": len(stats),
         "time_mean_s": float(np.mean([s["time_s"] for s in stats])),
         "path_length_mean_m": float(np.mean([s["path_length_m"] for s in stats])),
-        "min_clearance_mean_m": float(np.mean(clear)) if clear else math.nan,
+        "min_gap_mean_m": float(np.mean(clear)) if clear else math.nan,
     }

@@ -2,7 +2,7 @@
 
 - ``CourteousDriver`` (γ = +1): waits aside until every exiting passenger is out of the door
   and has turned aside, then a privileged lookahead over the rule terms that never lets its
-  predicted clearance to anyone drop below 0.2 m. Aside: a spot beside its start, on the side
+  predicted gap to anyone drop below 0.2 m. Aside: a spot beside its start, on the side
   away from the passenger's exit (privileged: the passenger's route), reached at a walk. In
   the compact world (1.3 m lobby, passengers leave straight out) there is no such room
   (docs/demonstrations.md); there it only keeps its distance.
@@ -74,7 +74,7 @@ class CourteousDriver(LookaheadTeacher):
             cfg = self.config
             # People who do not make way: where waiting would be hit, dodge with the lookahead.
             still = rollout(world, st, np.zeros((1, 2)), cfg.horizon, cfg.dt, cfg.human_model)
-            if still.collided[0] or still.min_clearance[0] < cfg.safety_margin:
+            if still.collided[0] or still.min_gap[0] < cfg.safety_margin:
                 return super().act(obs, info)
             self.last = None
             self._prev = np.zeros(2)

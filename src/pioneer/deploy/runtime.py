@@ -244,12 +244,13 @@ class StudentRuntime:
                 )
             )
 
-    def decide_batch(
+    def raw_outputs(
         self, obs: NDArray[np.floating]
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
         """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``:
-        the graph's raw outputs, for analysis (the action is not clipped; :meth:`decide` and
-        :meth:`step` clip it); the uncertainties are NaN for a regression (MLP) student."""
+        the graph's raw outputs, for analysis (the action is not clipped;
+        :meth:`from_observation` and :meth:`step` clip it); the uncertainties are NaN for a
+        regression (MLP) student."""
         x = np.ascontiguousarray(obs, dtype=np.float32)
         if x.ndim != 2 or x.shape[1] != self.obs_dim:
             raise DataError(
@@ -264,7 +265,7 @@ class StudentRuntime:
         epistemic = got[2] if len(got) > 2 else nan
         return action, aleatoric, epistemic
 
-    def decide(self, obs: NDArray[np.floating]) -> RuntimeDecision:
+    def from_observation(self, obs: NDArray[np.floating]) -> RuntimeDecision:
         """The decision for one observation ``(29,)``, clipped to the command limits (a
         non-finite action is a stop with reason ``"action"``); no scan, so no scan health."""
         return self._decide(obs, math.nan, math.nan, math.nan)
@@ -310,7 +311,7 @@ class StudentRuntime:
     def _decide(
         self, obs: NDArray[np.floating], valid_share: float, coverage_rad: float, age_s: float
     ) -> RuntimeDecision:
-        a, al, ep = self.decide_batch(np.reshape(obs, (1, -1)))
+        a, al, ep = self.raw_outputs(np.reshape(obs, (1, -1)))
         v, w = float(a[0, 0]), float(a[0, 1])
         if not (math.isfinite(v) and math.isfinite(w)):
             return _stop("action", valid_share, coverage_rad, age_s)
@@ -358,7 +359,7 @@ class OnnxStudentPolicy:
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""
-        d = self.runtime.decide(obs)
+        d = self.runtime.from_observation(obs)
         self.uncertainty.append((d.aleatoric, d.epistemic))
         return np.array([d.v, d.omega])
 

@@ -54,8 +54,8 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ``info`` carries ``event`` (``"success"``, ``"collision"``, ``"timeout"`` or ``None``) and
     its ``event_code`` (:class:`~pioneer.sim.events.Event`),
-    ``robot_pose`` (x, y, θ), ``goal``, ``min_clearance`` (swept clearance to the nearest human
-    over the last step [m]), ``episode_min_clearance``, ``time`` [s], ``path_length`` [m],
+    ``robot_pose`` (x, y, θ), ``goal``, ``min_gap`` (swept surface-to-surface gap to the
+    nearest human over the last step [m]), ``episode_min_gap``, ``time`` [s], ``path_length`` [m],
     ``rewards`` (per term), and ``state``/``world`` for privileged controllers.
     """
 
@@ -101,7 +101,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             self._state = start.copy()
         else:
             self._state = sample_state(self.scenario, self.np_random)
-        self._ep_min_clear = float(self._state.clearance[0])
+        self._ep_min_clear = float(self._state.gap[0])
         obs = observe(self.world, self._state, self.np_random)[0]
         return obs, self._info(Event.NONE, {})
 
@@ -112,7 +112,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         prev = self.state
         new = step(self.world, prev, np.asarray(action, dtype=np.float64))
         self._state = new
-        self._ep_min_clear = min(self._ep_min_clear, float(new.clearance[0]))
+        self._ep_min_clear = min(self._ep_min_clear, float(new.gap[0]))
         codes = classify(prev, new, self.world.sim.time_limit)  # the world ends episodes
         total, terms = self.reward(self.world, prev, new, codes)
         event = Event(int(codes[0]))
@@ -128,9 +128,9 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             "event_code": int(event),
             "robot_pose": s.robot[0].copy(),
             "goal": s.goal[0].copy(),
-            "min_clearance": float(s.clearance[0]),
-            "episode_min_clearance": self._ep_min_clear,
-            "wall_clearance": float(s.wall_clearance[0]),
+            "min_gap": float(s.gap[0]),
+            "episode_min_gap": self._ep_min_clear,
+            "wall_gap": float(s.wall_gap[0]),
             "time": float(s.t[0]),
             "path_length": float(s.path_length[0]),
             "rewards": rewards,

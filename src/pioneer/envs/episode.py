@@ -7,7 +7,7 @@ the policy is reset with a generator seeded by the same seed, and the episode en
 first step whose ``info["event"]`` is set (success, collision or timeout; the world decides).
 
 What a caller keeps is its own business: :meth:`Episode.run` hands every :class:`Step` to an
-``on_step`` callback (frames, teacher labels, clearances), and :meth:`Episode.step` lets an
+``on_step`` callback (frames, teacher labels, gaps), and :meth:`Episode.step` lets an
 interactive caller (teleoperation) advance one control period at a time.
 """
 

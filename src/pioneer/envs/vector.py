@@ -14,8 +14,8 @@ identical observations, rewards and flags (tested).
 
 ``infos`` has the keys of the single environment's ``info``, each value stacked over the
 copies: ``event`` (labels, ``None`` while going on), ``event_code`` (int8 codes of
-:class:`~pioneer.sim.events.Event`), ``robot_pose``, ``goal``, ``min_clearance``,
-``episode_min_clearance``, ``wall_clearance`` [m], ``time`` [s], ``path_length`` [m],
+:class:`~pioneer.sim.events.Event`), ``robot_pose``, ``goal``, ``min_gap``,
+``episode_min_gap``, ``wall_gap`` [m], ``time`` [s], ``path_length`` [m],
 ``rewards`` (per term), and the batched ``state`` and the ``world``.
 """
 
@@ -98,7 +98,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
                 self._rngs[i] = gym.utils.seeding.np_random(s)[0]
         self._state = State.concat([sample_state(self.scenario, rng) for rng in self._rngs])
         self._autoreset[:] = False
-        self._ep_min_clear = self._state.clearance.copy()
+        self._ep_min_clear = self._state.gap.copy()
         none = np.zeros(self.num_envs, dtype=np.int8)
         return self._observe(), self._info(self._state, none, {})
 
@@ -123,11 +123,11 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
         new = step(self.world, prev, cmd)
         event = classify(prev, new, self.world.sim.time_limit)  # the world ends episodes
         total, terms = self.reward(self.world, prev, new, event)
-        np.minimum(self._ep_min_clear, new.clearance, out=self._ep_min_clear)
+        np.minimum(self._ep_min_clear, new.gap, out=self._ep_min_clear)
         restart = np.flatnonzero(self._autoreset)
         for i in restart:
             new.put(int(i), sample_state(self.scenario, self._rngs[i]))
-            self._ep_min_clear[i] = new.clearance[i]
+            self._ep_min_clear[i] = new.gap[i]
         total[restart] = 0.0
         event[restart] = Event.NONE
         for v in terms.values():
@@ -155,9 +155,9 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
             "event_code": event,
             "robot_pose": state.robot.copy(),
             "goal": state.goal.copy(),
-            "min_clearance": state.clearance.copy(),
-            "episode_min_clearance": self._ep_min_clear.copy(),
-            "wall_clearance": state.wall_clearance.copy(),
+            "min_gap": state.gap.copy(),
+            "episode_min_gap": self._ep_min_clear.copy(),
+            "wall_gap": state.wall_gap.copy(),
             "time": state.t.copy(),
             "path_length": state.path_length.copy(),
             "rewards": rewards,

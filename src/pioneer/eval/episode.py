@@ -14,12 +14,18 @@ from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
 from pioneer.envs.policy import Policy
 from pioneer.sim.scenarios import ScenarioConfig
-from pioneer.sim.world import State, World
+from pioneer.sim.world import State, World, clearance
 
-__all__ = ["RISKY_DISTANCE_M", "EpisodeRecord", "Trajectory", "run_episode"]
+__all__ = ["RECORD_FORMAT", "RISKY_DISTANCE_M", "EpisodeRecord", "Trajectory", "run_episode"]
 
 # The paper's safe/risky threshold (Table IV): a frame within this distance of a person is risky.
 RISKY_DISTANCE_M = 0.8  # [m]
+
+# The version of the record layout (``format`` in every record). 2: the surface-to-surface
+# distance is the ``gap`` (``min_gap_m``, ``min_wall_gap_m``, frames ``gap``) and
+# ``clearance`` is centre to surface (frames); 1 (no ``format``) named the gap "clearance" and
+# the centre distance "surface" — :func:`pioneer.eval.records.parse_records` upgrades it.
+RECORD_FORMAT = 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,22 +56,24 @@ class EpisodeRecord:
     event: str  # "success", "collision" or "timeout"
     time_s: float
     path_length_m: float
-    min_clearance_m: float  # minimum over the episode (inf if no humans)
-    time_close_s: float  # time with clearance below RISKY_DISTANCE_M
+    min_gap_m: float  # [m] least gap (surface to surface) to a human (inf if no humans)
+    time_close_s: float  # [s] time with a gap below RISKY_DISTANCE_M
     steps: int
     # What the robot hit in a collision: "human", "wall" or "human and wall" (None otherwise).
     collided_with: str | None = None
-    min_wall_clearance_m: float = math.inf  # minimum robot–wall gap over the episode [m]
-    # Per-frame series of policies that report uncertainty (students): "clearance" [m] at
-    # decision time, "aleatoric" and "epistemic" [(m/s)² + (rad/s)²], and for a shield
-    # "shielded" (0/1). None for other policies.
+    min_wall_gap_m: float = math.inf  # minimum robot–wall gap over the episode [m]
+    # Per-frame series of policies that report uncertainty (students): "gap" and "clearance"
+    # [m] of the state each command was chosen in (pioneer.sim.world.clearance), "aleatoric"
+    # and "epistemic" [(m/s)² + (rad/s)²], and for a shield "shielded" (0/1). None for other
+    # policies.
     frames: dict[str, list[float]] | None = None
+    format: int = RECORD_FORMAT  # the record layout's version
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict; an infinite clearance becomes ``None``; no ``frames`` key without
+        """Plain dict; an infinite gap becomes ``None``; no ``frames`` key without
         frames; frame values rounded to 6 significant digits (a compact JSON line)."""
         d = dataclasses.asdict(self)
-        for key in ("min_clearance_m", "min_wall_clearance_m"):
+        for key in ("min_gap_m", "min_wall_gap_m"):
             if not math.isfinite(d[key]):
                 d[key] = None
         if self.frames is None:
@@ -76,34 +84,34 @@ class EpisodeRecord:
 
 
 def _compact(x: float) -> float | None:
-    """``x`` to 6 significant digits; non-finite (inf clearance, NaN) → ``None``."""
+    """``x`` to 6 significant digits; non-finite (inf gap, NaN) → ``None``."""
     return float(f"{x:.6g}") if math.isfinite(x) else None
 
 
 def _frame_series(
-    policy: Policy, clearance: list[float], robot_radius: float
+    policy: Policy, gap: list[float], clear: list[float]
 ) -> dict[str, list[float]] | None:
     """The per-frame series of a policy that reports ``uncertainty`` (one pair per step):
-    ``clearance`` is the surface gap (docs/simulator.md), ``surface`` the distance from the robot's
-    centre to the nearest human's surface (the paper's "clearance", what d₁ measures)."""
+    ``gap`` surface to surface (docs/simulator.md), ``clearance`` from the robot's centre to
+    the nearest human's surface (the paper's clearance, what d₁ measures)."""
     unc = getattr(policy, "uncertainty", None)
-    if unc is None or len(unc) != len(clearance):
+    if unc is None or len(unc) != len(gap):
         return None
     out = {
-        "clearance": clearance,
-        "surface": [c + robot_radius for c in clearance],
+        "gap": gap,
+        "clearance": clear,
         "aleatoric": [float(a) for a, _ in unc],
         "epistemic": [float(e) for _, e in unc],
     }
     shielded = getattr(policy, "shielded", None)
-    if shielded is not None and len(shielded) == len(clearance):
+    if shielded is not None and len(shielded) == len(gap):
         out["shielded"] = [float(s) for s in shielded]
     return out
 
 
 def _hit(info: Mapping[str, Any]) -> str:
-    """What a collision step touched: the swept human and wall clearances of that step."""
-    human, wall = info["min_clearance"] < 0.0, info["wall_clearance"] < 0.0
+    """What a collision step touched: the swept human and wall gaps of that step."""
+    human, wall = info["min_gap"] < 0.0, info["wall_gap"] < 0.0
     return "human and wall" if human and wall else "wall" if wall else "human"
 
 
@@ -120,15 +128,18 @@ def run_episode(
     states = [env.state] if record else []
     dt = env.scenario.sim.dt
     close = 0.0
-    decision_clearance: list[float] = []  # clearance of the state each command was chosen in
+    r_r = env.scenario.sim.robot.radius
+    decision_gap: list[float] = []  # of the state each command was chosen in
+    decision_clear: list[float] = []
     wall_min = math.inf
 
     def keep(step: Step) -> None:
         nonlocal close, wall_min
-        decision_clearance.append(float(step.info["min_clearance"]))
+        decision_gap.append(float(step.info["min_gap"]))
+        decision_clear.append(float(clearance(step.info["state"], r_r)[0]))
         after = step.next_info
-        wall_min = min(wall_min, float(after["wall_clearance"]))
-        if after["min_clearance"] < close_threshold:
+        wall_min = min(wall_min, float(after["wall_gap"]))
+        if after["min_gap"] < close_threshold:
             close += dt
         if record:
             states.append(after["state"])
@@ -142,11 +153,11 @@ def run_episode(
         event=event,
         time_s=info["time"],
         path_length_m=info["path_length"],
-        min_clearance_m=info["episode_min_clearance"],
+        min_gap_m=info["episode_min_gap"],
         time_close_s=close,
         steps=episode.steps,
         collided_with=_hit(info) if event == "collision" else None,
-        min_wall_clearance_m=wall_min,
-        frames=_frame_series(policy, decision_clearance, env.scenario.sim.robot.radius),
+        min_wall_gap_m=wall_min,
+        frames=_frame_series(policy, decision_gap, decision_clear),
     )
     return rec, (Trajectory(env.world, states) if record else None)

@@ -8,7 +8,7 @@ one of two ways (``"interval"`` in each summary entry says which):
   seed values with n_seeds − 1 degrees of freedom (``ci95`` is its half-width);
 - ``"episodes"`` — with fewer seeds, a t interval over seeds would be meaningless (two seeds
   give t(0.975, 1) = 12.7, an interval wider than 0–100 %), so the episodes are pooled: the
-  rates get the Wilson score interval over episodes, the times, lengths and clearances a
+  rates get the Wilson score interval over episodes, the times, lengths and gaps a
   Student-t interval over episodes.
 
 Either way the interval is clipped to the quantity's range (:data:`RANGES`), so no interval
@@ -17,8 +17,8 @@ exceeds it. The metrics:
 - ``success_rate``, ``collision_rate``, ``timeout_rate`` [%];
 - ``time_mean_s``, ``path_length_mean_m``: over successful episodes (the paper's TT and PL),
   and ``time_mean_all_s``, ``path_length_mean_all_m`` over all episodes;
-- ``min_clearance_m``: mean of each episode's minimum clearance to any human;
-- ``time_close_s``: mean time per episode with clearance below 0.8 m.
+- ``min_gap_m``: mean of each episode's minimum gap (surface to surface) to any human;
+- ``time_close_s``: mean time per episode with a gap below 0.8 m.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ METRICS = (
     "path_length_mean_m",
     "time_mean_all_s",
     "path_length_mean_all_m",
-    "min_clearance_m",
+    "min_gap_m",
     "time_close_s",
 )
 RANGES: dict[str, tuple[float, float]] = {
@@ -51,7 +51,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "path_length_mean_m": (0.0, math.inf),
     "time_mean_all_s": (0.0, math.inf),
     "path_length_mean_all_m": (0.0, math.inf),
-    "min_clearance_m": (-math.inf, math.inf),  # negative at a collision (overlap)
+    "min_gap_m": (-math.inf, math.inf),  # negative at a collision (overlap)
     "time_close_s": (0.0, math.inf),
 }
 MIN_SEEDS = 3  # fewer seeds: intervals over episodes instead of over seeds
@@ -99,7 +99,7 @@ def _episode_values(recs: Sequence[Mapping[str, Any]], metric: str) -> list[floa
         "path_length_mean_m": ("path_length_m", ok),
         "time_mean_all_s": ("time_s", recs),
         "path_length_mean_all_m": ("path_length_m", recs),
-        "min_clearance_m": ("min_clearance_m", recs),
+        "min_gap_m": ("min_gap_m", recs),
         "time_close_s": ("time_close_s", recs),
     }
     key, rows = source[metric]

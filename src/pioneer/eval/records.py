@@ -3,7 +3,8 @@
 Records are appended whole by one writer (:func:`append_record`: line, flush, fsync; a torn
 line is cut off again on a full disk). Reading (:func:`read_records`) refuses a malformed line
 with its line number, drops an unfinished last line (a crash mid-write) with a warning, and
-counts each episode (scenario, policy, seed, trial) once, saying how many repeats it ignored.
+counts each episode (scenario, policy, seed, trial) once, saying how many repeats it ignored,
+and upgrades records of an older layout (:func:`upgrade_record`).
 """
 
 from __future__ import annotations
@@ -16,9 +17,45 @@ from pathlib import Path
 from typing import Any
 
 from pioneer.errors import ConfigError, DataError, expect
+from pioneer.eval.episode import RECORD_FORMAT
 from pioneer.io import naming_path, to_json
 
-__all__ = ["append_record", "check_seed_set", "key_of", "parse_records", "read_records"]
+__all__ = [
+    "append_record",
+    "check_seed_set",
+    "key_of",
+    "parse_records",
+    "read_records",
+    "upgrade_record",
+]
+
+# Layout 1 (records without ``format``) named the surface-to-surface gap "clearance" and the
+# centre-to-surface distance "surface"; layout 2 calls them ``gap`` and ``clearance``.
+_V1_FIELDS = {"min_clearance_m": "min_gap_m", "min_wall_clearance_m": "min_wall_gap_m"}
+_V1_FRAMES = {"clearance": "gap", "surface": "clearance"}
+
+
+def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
+    """``rec`` in the current layout (:data:`pioneer.eval.episode.RECORD_FORMAT`): a record
+    of layout 1 (no ``format``) has its fields renamed, values untouched, and gains
+    ``format``; a newer layout is refused."""
+    version = rec.get("format", 1)
+    if version == RECORD_FORMAT:
+        return rec
+    if not isinstance(version, int) or version > RECORD_FORMAT:
+        raise DataError(
+            expect(
+                "record format",
+                f"{RECORD_FORMAT} or older",
+                version,
+                "read it with the PioneeR version that wrote it (a newer one)",
+            )
+        )
+    out = {_V1_FIELDS.get(k, k): v for k, v in rec.items()}
+    if isinstance(out.get("frames"), dict):
+        out["frames"] = {_V1_FRAMES.get(k, k): v for k, v in out["frames"].items()}
+    out["format"] = RECORD_FORMAT
+    return out
 
 
 def key_of(rec: Mapping[str, Any]) -> tuple[str, str, int, int]:
@@ -73,7 +110,7 @@ def parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
             duplicates += 1
             continue
         seen.add(key)
-        out.append(rec)
+        out.append(upgrade_record(rec))
     return out, whole, duplicates
 
 

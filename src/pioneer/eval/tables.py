@@ -96,7 +96,7 @@ def table_rows(
                     "pl": s["path_length_mean_m"],
                     "collision": s["collision_rate"],
                     "timeout": s["timeout_rate"],
-                    "min_clear": s["min_clearance_m"],
+                    "min_clear": s["min_gap_m"],
                     "paper": paper,
                 }
             )
@@ -115,7 +115,7 @@ def markdown_table(rows: Sequence[TableRow], title: str) -> str:
         "paper SR / TT / PL",
         "collisions (%)",
         "timeouts (%)",
-        "min clearance (m)",
+        "min gap (m)",
         "episodes",
     ]
     out = [f"**{title}**", ""]
@@ -161,7 +161,7 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
             "pl_ci95",
             "collision_rate",
             "timeout_rate",
-            "min_clearance_m",
+            "min_gap_m",
             "paper_sr",
             "paper_tt_s",
             "paper_pl_m",

@@ -1,11 +1,12 @@
 """The safe/risky uncertainty analysis (paper §V-B.2, Table IV) from evaluation records.
 
-A frame is one decision of a student in an evaluation episode; its clearance is the minimum
-human–robot clearance of the state the decision was made in (``frames`` of
-:class:`pioneer.eval.episode.EpisodeRecord`). Frames with clearance > 0.8 m are safe, the rest
-risky (no humans in range: safe). Per class: frame counts and mean aleatoric and epistemic
-uncertainty (paper Table IV); beyond the paper, the AUROC of each uncertainty as a detector of
-risky frames (0.5: no signal, 1: perfect).
+A frame is one decision of a student in an evaluation episode; its clearance is the distance
+from the robot's centre to the nearest human's surface in the state the decision was made in
+(``frames`` of :class:`pioneer.eval.episode.EpisodeRecord`; the paper's clearance, what d₁
+measures). Frames with clearance > 0.8 m are safe, the rest risky (no humans in range: safe).
+Per class: frame counts and mean aleatoric and epistemic uncertainty (paper Table IV); beyond
+the paper, the AUROC of each uncertainty as a detector of risky frames (0.5: no signal, 1:
+perfect).
 """
 
 from __future__ import annotations
@@ -45,21 +46,20 @@ PAPER_TABLE_IV: dict[str, dict[str, float]] = {
 }
 
 
-MEASURES = ("clearance", "surface")  # the frame series a risky threshold can apply to
+MEASURES = ("clearance", "gap")  # the frame series a risky threshold can apply to
 
 
 def frame_arrays(
     records: Iterable[Mapping[str, Any]], measure: str = "clearance"
 ) -> dict[str, NDArray[np.float64]]:
     """Concatenate the per-frame series of ``records`` (those without frames are skipped);
-    ``None`` (no human in range / not reported) becomes ``inf`` for clearance, NaN otherwise.
+    ``None`` (no human in range / not reported) becomes ``inf`` for a distance, NaN otherwise.
 
-    The ``clearance`` column holds the frames' ``measure``: ``clearance`` (the surface gap,
-    docs/simulator.md) or ``surface`` (robot centre → nearest human surface, the paper's
-    clearance)."""
+    The ``distance`` column holds the frames' ``measure``: ``clearance`` (robot centre →
+    nearest human surface, the paper's) or ``gap`` (surface to surface, docs/simulator.md)."""
     if measure not in MEASURES:
-        raise DataError(expect("clearance measure", f"one of {MEASURES}", measure, "pick one"))
-    cols: dict[str, list[float]] = {"clearance": [], "aleatoric": [], "epistemic": []}
+        raise DataError(expect("distance measure", f"one of {MEASURES}", measure, "pick one"))
+    cols: dict[str, list[float]] = {"distance": [], "aleatoric": [], "epistemic": []}
     for rec in records:
         fr = rec.get("frames")
         if not fr:
@@ -79,7 +79,7 @@ def frame_arrays(
                 expect("record frames", "equally long series", rec.get("seed"), "re-run it")
             )
         for key, src, missing in (
-            ("clearance", measure, math.inf),
+            ("distance", measure, math.inf),
             ("aleatoric", "aleatoric", math.nan),
             ("epistemic", "epistemic", math.nan),
         ):
@@ -96,7 +96,7 @@ def safe_risky(
     is risky when its ``measure`` (see :func:`frame_arrays`) is ≤ ``threshold``."""
     fr = frame_arrays(records, measure)
     ok = np.isfinite(fr["aleatoric"]) & np.isfinite(fr["epistemic"])
-    clear, ale, epi = fr["clearance"][ok], fr["aleatoric"][ok], fr["epistemic"][ok]
+    clear, ale, epi = fr["distance"][ok], fr["aleatoric"][ok], fr["epistemic"][ok]
     risky = clear <= threshold
     out: dict[str, Any] = {
         "threshold_m": threshold,

@@ -41,6 +41,7 @@ from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.io import output_dir, to_json, write_text_atomic
 from pioneer.progress import progress_bar
 from pioneer.seeds import validation_seed
+from pioneer.sim.world import clearance
 
 __all__ = ["BANDS", "RISKY_CLEARANCE", "calibrate", "episode_statistics", "summarize_world"]
 
@@ -65,15 +66,6 @@ def _paper(scenario: str) -> dict[str, float]:
     iv = PAPER_TABLE_IV[scenario]
     share = iv["frames_risky"] / (iv["frames_risky"] + iv["frames_safe"])
     return {"teacher_path_length_m": pl, "teacher_time_s": tt, "risky_share": share}
-
-
-def _surface_distance(state: Any) -> float:
-    """Distance from the robot's centre to the nearest present human's surface [m]."""
-    present = state.humans_present[0]
-    if not present.any():
-        return math.inf
-    d = np.linalg.norm(state.h_pos[0] - state.robot[0, :2], axis=1) - state.h_radius[0]
-    return float(d[present].min())
 
 
 def _path_distance(points: NDArray[np.float64], path: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -124,8 +116,8 @@ def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     states = traj.states
     state0 = states[0]
     decision = states[:-1]  # the state each command was chosen in
-    surf = np.array([_surface_distance(s) for s in decision])
     r_r = cfg.sim.robot.radius
+    surf = np.array([float(clearance(s, r_r)[0]) for s in decision])
     # 2. careless driver, same seed
     c_event = run_episode(cfg, CarelessDriver(), seed)[0].event
     # 3. humans alone, same initial state
@@ -146,7 +138,7 @@ def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
         "risky_frames_gap": int(np.sum(surf - r_r <= RISKY_CLEARANCE)),
         "frames": len(decision),
         "risky_at_start": bool(surf[0] <= RISKY_CLEARANCE),
-        "start_surface_distance_m": float(surf[0]),
+        "start_clearance_m": float(surf[0]),
         "careless_event": c_event,
         "humans_alone_done": done,
         "humans_alone_time_s": float(alone[-1].t[0]),

@@ -372,16 +372,16 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
     hist: dict[str, dict[str, Any]] = {}
     for sc in SCENARIOS:
         recs = [r for r in records if r["scenario"] == sc and r["policy"] == "student-mdn"]
-        fr = frame_arrays(recs, "surface")
-        if fr["clearance"].size == 0:
+        fr = frame_arrays(recs, "clearance")
+        if fr["distance"].size == 0:
             continue
-        results[sc] = safe_risky(recs, RISKY_DISTANCE_M, "surface")
+        results[sc] = safe_risky(recs, RISKY_DISTANCE_M, "clearance")
         p = PAPER_TABLE_IV[sc]
         share = p["frames_risky"] / (p["frames_risky"] + p["frames_safe"])
-        finite = fr["clearance"][np.isfinite(fr["clearance"])]
+        finite = fr["distance"][np.isfinite(fr["distance"])]
         thr = float(np.quantile(finite, share)) if finite.size else RISKY_DISTANCE_M
-        matched[sc] = safe_risky(recs, thr, "surface")
-        risky = fr["clearance"] <= thr
+        matched[sc] = safe_risky(recs, thr, "clearance")
+        risky = fr["distance"] <= thr
         for name in ("aleatoric", "epistemic"):
             hist[f"{sc} {name} (risky: centre → surface ≤ {thr:.2f} m)"] = {
                 "safe": fr[name][~risky],

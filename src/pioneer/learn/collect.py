@@ -80,7 +80,7 @@ def collect_episode(
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
-    labels), ``applied (T, 2)``, ``clearance (T,)`` (at decision time), ``aleatoric``,
+    labels), ``applied (T, 2)``, ``gap (T,)`` (surface to surface, at decision time), ``aleatoric``,
     ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
     from pioneer.envs.env import NavEnv
     from pioneer.envs.episode import Episode, Step
@@ -94,7 +94,7 @@ def collect_episode(
         rows_obs.append(np.asarray(step.obs, dtype=np.float32))
         rows_lab.append(driver.label)
         rows_app.append(step.command)
-        rows_clear.append(step.info["min_clearance"])
+        rows_clear.append(step.info["min_gap"])
 
     episode = Episode(NavEnv(scenario), driver, env_seed)
     info = episode.run(keep)
@@ -108,7 +108,7 @@ def collect_episode(
         "obs": np.stack(rows_obs),
         "action": np.stack(rows_lab).astype(np.float32),
         "applied": np.stack(rows_app).astype(np.float32),
-        "clearance": np.asarray(rows_clear, dtype=np.float64),
+        "gap": np.asarray(rows_clear, dtype=np.float64),
         "aleatoric": unc[:, 0],
         "epistemic": unc[:, 1],
         "event": np.array(episode.event),

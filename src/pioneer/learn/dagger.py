@@ -16,7 +16,7 @@ is checked before the folder is created or changed)::
     DIR/scenario.json                    the scenario's full config (a rerun must match it)
                                          (a pattern such as ``general-*``: every match's)
     DIR/reward.npz                       the teacher's density reward (a pattern: reward-BASE.npz)
-    DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, clearance, …)
+    DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, gap, …)
     DIR/rounds/round-RR/student.safetensors   the student trained after round RR
     DIR/curves.csv, DIR/curves.png       loss and student success per round
     DIR/student.safetensors              the final student (= last round's)

@@ -27,8 +27,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative
 from pioneer.control.registry import build_policy
-from pioneer.control.teacher import LookaheadTeacher
-from pioneer.envs.policy import Policy
+from pioneer.envs.policy import Planner, Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.learn.models import read_checkpoint_meta
 from pioneer.learn.policy import StudentPolicy, make_student_policy
@@ -99,7 +98,7 @@ class ShieldPolicy:
         if self.mode == "slow":
             return np.array([u[0] * self.slow_factor, u[1]])
         assert self.fallback is not None
-        if isinstance(self.fallback, LookaheadTeacher):  # smooth from the applied command
+        if isinstance(self.fallback, Planner):  # e.g. the teacher: smooth from the applied command
             state = info["state"]
             return self.fallback.decide(info["world"], state, prev=state.command[0]).command
         return np.asarray(self.fallback.act(obs, info), dtype=np.float64)

@@ -3,21 +3,21 @@ the CrowdNav++ baseline is trained on, and the Gymnasium environments' own rewar
 
     r = +10                                  on success
         −20                                  on collision (a human or a wall)
-        (d − 0.25) · 10 · Δt                 else if the clearance d < 0.25 m
+        (d − 0.25) · 10 · Δt                 else if the gap d < 0.25 m
         3 (‖g − p_{t−1}‖ − ‖g − p_t‖)        otherwise (potential: decrease of goal distance)
       + min_{i,k} −20 / 2^(k+1) · [‖p_t − p̂_i(k)‖ < r_r + r_i]   intrusion into the CV-predicted
                                              positions k = 1..5 (Δt_pred = 0.25 s) of human i
       − 4.5 Δθ²                              spin: Δθ = ω Δt, the heading change of the step
       − 2 |v| if v < 0                       reversing (inert here: our v_min = 0)
 
-d is the swept clearance over the step (``State.clearance``) and Δt our 0.1 s; the intrusion
+d is the swept surface-to-surface gap over the step (``State.gap``) and Δt our 0.1 s; the intrusion
 term is charged on non-terminal steps. The original steps every T = 0.25 s; the per-step terms
-(intrusion, spin, reversing) are rescaled to our Δt so that a second of them costs what it
-costs there: intrusion and reversing × Δt/T, spin × T/Δt (Δθ² shrinks with Δt²). Without it a
-second near a person costs 2.5× the original's (−50 instead of −20 at k = 1), more than a
-collision, and pure PPO learned to end its episodes by colliding (docs/baselines.md). The spin
-term charges the heading change of the step, as the original's unicycle action is a rotation
-per step (Δθ = ω Δt); an earlier copy in the environment charged ω² Δt (docs/architecture.md).
+(intrusion, spin, reversing) are rescaled to our Δt so that a second of them costs what it costs
+there: intrusion and reversing × Δt/T, spin × T/Δt (Δθ² shrinks with Δt²). Without it a second near
+a person costs 2.5× the original's (−50 instead of −20 at k = 1), more than a collision, and pure
+PPO learned to end its episodes by colliding (docs/baselines.md). The spin term charges the heading
+change of the step, as the original's unicycle action is a rotation per step (Δθ = ω Δt); an earlier
+copy in the environment charged ω² Δt (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ class CrowdNavRewardConfig(Config):
 
     success: float = 10.0  # on reaching the goal
     collision: float = -20.0  # on a collision (humans or walls)
-    discomfort_distance: float = 0.25  # [m] clearance below which discomfort is charged
+    discomfort_distance: float = 0.25  # [m] gap below which discomfort is charged
     discomfort_scale: float = 10.0  # (d − d_disc) · scale · Δt  [1/(m·s)]
     potential: float = 3.0  # × decrease of goal distance [1/m]
     intrusion: float = -20.0  # / 2^(k+1) for predicted step k = 1..n_pred
@@ -60,7 +60,7 @@ class CrowdNavRewardConfig(Config):
 class _Parts(NamedTuple):
     event: NDArray[np.int8]
     ongoing: NDArray[np.bool_]  # neither collided nor arrived in this step
-    close: NDArray[np.bool_]  # clearance below the discomfort distance
+    close: NDArray[np.bool_]  # gap below the discomfort distance
     base: F64  # discomfort or potential term
     first: F64  # outcome reward, else ``base``
     intrusion: F64
@@ -111,7 +111,7 @@ def _parts(
     collided, reached = event == _COLLISION, event == _SUCCESS
     d0 = _norm2(prev.goal - prev.robot[:, :2])
     d1 = _norm2(new.goal - new.robot[:, :2])
-    c = new.clearance
+    c = new.gap
     close = c < rc.discomfort_distance
     ongoing = ~(collided | reached)
     base = np.where(

@@ -5,7 +5,7 @@
   along its exact arc, and the swept collision checks (module docstring of
   :mod:`pioneer.sim.world`);
 - :func:`trajectory_kernel` — L calls of ``step_kernel`` in one call, recording each step's
-  robot pose, the humans as LiDAR circles and the running minimum clearances (the teacher's
+  robot pose, the humans as LiDAR circles and the running minimum gaps (the teacher's
   rollout, ``pioneer.sim.world.advance``): the same values without L Python calls, L state
   copies and L argument packs. Optionally a copy stops at its first collision (the teacher
   discards a colliding candidate, so a quarter of its copy-steps need not be simulated).

@@ -35,6 +35,7 @@ __all__ = [
     "World",
     "WorldTrace",
     "advance",
+    "clearance",
     "goal_bearing",
     "observe",
     "observe_arrays",
@@ -138,8 +139,8 @@ class State:
     path_length: F64  # (B,) distance travelled [m]
     collided: NDArray[np.bool_]  # (B,) a collision happened (sticky)
     reached: NDArray[np.bool_]  # (B,) the goal was reached without collision (sticky)
-    clearance: F64  # (B,) min swept human clearance over the last step [m] (inf: no humans)
-    wall_clearance: F64  # (B,) min swept wall clearance over the last step [m]
+    gap: F64  # (B,) min swept human gap (surface to surface) over the last step [m] (inf: none)
+    wall_gap: F64  # (B,) min swept robot-surface-to-wall gap over the last step [m]
     h_pos: F64  # (B, N, 2) human positions [m]
     h_vel: F64  # (B, N, 2) human velocities [m/s]
     h_radius: F64  # (B, N) [m]
@@ -251,8 +252,8 @@ class WorldTrace:
     final: State  # the copies after the L-th step (or at their collision step)
     poses: F64  # (B, L, 3) robot pose after each step
     circles: F64  # (B, L, N, 3) the humans after each step as LiDAR circles x, y, r (0: gone)
-    clearance: F64  # (B,) minimum swept human clearance over the simulated steps [m]
-    wall_clearance: F64  # (B,) minimum swept wall clearance over the simulated steps [m]
+    gap: F64  # (B,) minimum swept human gap (surface to surface) over the simulated steps [m]
+    wall_gap: F64  # (B,) minimum swept robot-to-wall gap over the simulated steps [m]
     live_steps: NDArray[np.int64]  # (B,) distinct records per copy: L, or 1 + its collision step
 
     def observations(
@@ -314,8 +315,8 @@ def advance(
     live = np.empty(n_b, dtype=np.int64)
     trajectory_kernel(
         step_kernel_args(world, new, u, h_dt, n_sub, stop_at_collision),
-        new.robot, new.h_pos, new.h_radius, new.h_status, new.collided, new.clearance,
-        new.wall_clearance, poses, circles, clear, wclear, live,
+        new.robot, new.h_pos, new.h_radius, new.h_status, new.collided, new.gap,
+        new.wall_gap, poses, circles, clear, wclear, live,
     )  # fmt: skip
     return WorldTrace(new, poses, circles, clear, wclear, live)
 
@@ -337,8 +338,8 @@ def step_kernel_args(
         s.path_length,
         s.collided,
         s.reached,
-        s.clearance,
-        s.wall_clearance,
+        s.gap,
+        s.wall_gap,
         s.h_pos,
         s.h_vel,
         s.h_radius,
@@ -382,6 +383,13 @@ def scan(world: World, state: State, rng: np.random.Generator | None = None) -> 
             )
         ranges = np.clip(ranges + rng.normal(0.0, lid.noise_std, ranges.shape), 0.0, lid.max_range)
     return ranges
+
+
+def clearance(state: State, robot_radius: float) -> F64:
+    """``(B,)`` the paper's clearance: from the robot's centre to the nearest human's surface
+    [m], the least over the last step — the swept :attr:`State.gap` (surface to surface) plus
+    the robot's radius; ``inf`` with no humans. The one place the two distances meet."""
+    return state.gap + robot_radius
 
 
 def goal_bearing(state: State) -> F64:

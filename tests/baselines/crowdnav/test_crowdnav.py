@@ -222,7 +222,7 @@ def test_reward_terms():
     s1 = step(world, s0, [0.0, 0.0])
     s1.h_pos[:] = (2.15, 0.0)
     s1.h_vel[:] = (-2.4, 0.0)
-    s1.clearance[:] = 1.25
+    s1.gap[:] = 1.25
     r, _ = crowdnav_reward(world, s1, s1, rc)
     # k = 1: 2.15 − 0.6 = 1.55 m (clear); k = 2: 0.95 m (clear, > 0.9); k = 3: 0.35 m (hit).
     # Charged per 0.25 s step in the original: × Δt/T = 0.1/0.25 per 0.1 s step here.
@@ -230,7 +230,7 @@ def test_reward_terms():
     r_step, _ = crowdnav_reward(world, s1, s1, RewardConfig(reference_dt=None))
     assert r_step[0] == pytest.approx(-20.0 / 2**4)
     # Discomfort replaces the potential; spin on the heading change of the step.
-    s1.clearance[:] = 0.05
+    s1.gap[:] = 0.05
     s1.h_pos[:] = (9.0, 9.0)
     s1.command[:] = (0.0, 0.5)
     r, _ = crowdnav_reward(world, s1, s1, rc)

@@ -51,7 +51,7 @@ def test_sampled_layouts_are_valid_scenarios(seed, tmp_path, clean_registry):
         assert n_humans <= dist.n_boarding[1] + dist.n_exiting[1]
         for s in range(10):  # every start state is collision-free, nobody outside the walls
             st = sample_state(cfg, np.random.default_rng(1000 + s))
-            assert st.clearance[0] > 0.0 and st.wall_clearance[0] > 0.0
+            assert st.gap[0] > 0.0 and st.wall_gap[0] > 0.0
 
 
 def test_the_same_seed_gives_the_same_layouts():

@@ -118,8 +118,8 @@ def test_sampled_states_are_collision_free_and_seeded(name):
         for i in range(len(pos)):
             for j in range(i):
                 assert np.linalg.norm(pos[i] - pos[j]) >= rad[i] + rad[j] + gap - 1e-12
-        assert state.clearance[0] >= gap - 1e-12
-        assert state.wall_clearance[0] >= gap - 1e-12
+        assert state.gap[0] >= gap - 1e-12
+        assert state.wall_gap[0] >= gap - 1e-12
         assert not state.collided[0] and not state.reached[0]
         assert np.all(state.h_vel == 0.0)
         assert set(state.h_vpref[0]) <= {0.0, 0.5, 0.6, 0.7}

@@ -75,6 +75,7 @@ from pioneer.baselines.crowdnav.observation import (
     obs_tensors,
 )
 from pioneer.config import Config, check_positive
+from pioneer.envs.policy import Planner
 from pioneer.errors import ConfigError, expect
 from pioneer.io import to_json
 from pioneer.sim.events import Event
@@ -255,14 +256,10 @@ def collect_episodes(
     )
 
 
-def expert_command(expert: Any, world: World, state: State) -> F64:
-    """The demonstrator's command ``(v, ω)`` in ``state``: the lookahead teacher smooths from
-    the applied command; the rule-based experts (``sfm``, ``dwa``) decide from the state."""
-    from pioneer.control.teacher import LookaheadTeacher
-
-    if isinstance(expert, LookaheadTeacher):
-        return np.asarray(expert.decide(world, state, prev=state.command[0]).command)
-    return np.asarray(expert.decide(world, state), dtype=np.float64)
+def expert_command(expert: Planner, world: World, state: State) -> F64:
+    """The demonstrator's command ``(v, ω)`` in ``state``, smoothed (the lookahead teacher)
+    from the command applied on the last step."""
+    return np.asarray(expert.decide(world, state, prev=state.command[0]).command, np.float64)
 
 
 def make_expert(name: str, scenario: str) -> Any:

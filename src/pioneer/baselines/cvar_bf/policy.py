@@ -357,8 +357,9 @@ class CvarBfPolicy:
         off[n * s + n :] = lin.hw0 - lin.gw @ lin.u_lin - (1.0 - self.config.gamma) * lin.hw_k
         return mat, off
 
-    def decide(self, world: World, state: State) -> CvarDecision:
-        """One decision from ``state`` (B = 1): adaptive-β QP, or the fallback."""
+    def decide(self, world: World, state: State, prev: F64 | None = None) -> CvarDecision:
+        """One decision from ``state`` (B = 1): adaptive-β QP, or the fallback (the last
+        command is the state's; ``prev`` is not used)."""
         cfg = self.config
         t0 = time.perf_counter()
         lin, extra = self.linearise(world, state)

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from pioneer.baselines.cvar_bf.barriers import cvar_weights
 from pioneer.baselines.cvar_bf.config import CvarBfConfig
+from pioneer.envs.policy import Decision
 from pioneer.errors import ConfigError, expect
 
 __all__ = ["CvarDecision", "QPResult", "cut_rows", "lifted_solution", "select_beta", "wall_rows"]
@@ -80,10 +81,10 @@ class _Linearised:
 
 
 @dataclasses.dataclass(frozen=True)
-class CvarDecision:
-    """One CVaR-BF decision: command, chosen risk level and the barrier data behind it."""
+class CvarDecision(Decision):
+    """One CVaR-BF decision: the command sent, the chosen risk level and the barrier data
+    behind it."""
 
-    command: F64  # (2,) the command sent (v [m/s], ω [rad/s])
     nominal: F64  # (2,) u_nom
     pose: F64  # (3,) robot pose x_k the decision was made from
     beta: float  # chosen β (NaN at a fallback)

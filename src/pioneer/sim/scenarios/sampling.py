@@ -60,8 +60,8 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
         path_length=np.zeros(1),
         collided=np.zeros(1, dtype=np.bool_),
         reached=np.zeros(1, dtype=np.bool_),
-        clearance=np.array([_min_clearance(p_r, pos, cfg, r_r)]),
-        wall_clearance=np.array([_wall_distance(p_r, walls) - r_r]),
+        gap=np.array([_min_gap(p_r, pos, cfg, r_r)]),
+        wall_gap=np.array([_wall_distance(p_r, walls) - r_r]),
         h_pos=pos.reshape(1, n, 2),
         h_vel=np.zeros((1, n, 2)),
         h_radius=np.array([[h.radius for h in cfg.humans]]).reshape(1, n),
@@ -87,7 +87,7 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
     )
 
 
-def _min_clearance(p_r: np.ndarray, pos: np.ndarray, cfg: ScenarioConfig, r_r: float) -> float:
+def _min_gap(p_r: np.ndarray, pos: np.ndarray, cfg: ScenarioConfig, r_r: float) -> float:
     if len(cfg.humans) == 0:
         return math.inf
     radii = np.array([h.radius for h in cfg.humans])

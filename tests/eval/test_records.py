@@ -1,0 +1,65 @@
+"""Records of an older layout read back in the current one (values untouched)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pioneer.errors import DataError
+from pioneer.eval.episode import RECORD_FORMAT, EpisodeRecord
+from pioneer.eval.records import read_records, upgrade_record
+from pioneer_testutils import assert_house_message
+
+V1 = {
+    "scenario": "hr-rl",
+    "policy": "student-mdn",
+    "seed": 3,
+    "trial": 0,
+    "event": "success",
+    "min_clearance_m": 0.12,
+    "min_wall_clearance_m": 0.4,
+    "frames": {"clearance": [0.5, 0.2], "surface": [0.8, 0.5], "aleatoric": [0.1, 0.2]},
+}
+
+
+def test_a_layout_1_record_gets_the_current_names_and_the_same_values():
+    got = upgrade_record(dict(V1))
+    assert got["min_gap_m"] == 0.12 and got["min_wall_gap_m"] == 0.4
+    assert "min_clearance_m" not in got and "min_wall_clearance_m" not in got
+    assert got["frames"] == {"gap": [0.5, 0.2], "clearance": [0.8, 0.5], "aleatoric": [0.1, 0.2]}
+    assert upgrade_record(got) == got  # idempotent
+
+
+def test_a_current_record_is_read_back_as_written(tmp_path):
+    fields = {f: None for f in EpisodeRecord.__dataclass_fields__}
+    rec = EpisodeRecord(
+        **{
+            **fields,
+            "scenario": "hr-rl",
+            "policy": "teacher",
+            "seed": 1,
+            "event": "success",
+            "time_s": 12.0,
+            "path_length_m": 3.7,
+            "min_gap_m": 0.02,
+            "time_close_s": 9.0,
+            "steps": 120,
+            "collided_with": None,
+            "min_wall_gap_m": 0.3,
+            "frames": None,
+            "format": RECORD_FORMAT,
+        }
+    ).to_dict()
+    rec["trial"] = 0
+    p = tmp_path / "episodes.jsonl"
+    p.write_text(json.dumps(V1) + "\n" + json.dumps(rec) + "\n")
+    old, new = read_records(p)
+    assert new == rec and new["format"] == RECORD_FORMAT
+    assert old["min_gap_m"] == V1["min_clearance_m"]
+
+
+def test_a_record_of_a_newer_layout_is_refused():
+    with pytest.raises(DataError) as err:
+        upgrade_record({**V1, "format": RECORD_FORMAT + 1})
+    assert_house_message(str(err.value), "record format", "newer")
