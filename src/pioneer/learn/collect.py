@@ -4,17 +4,15 @@ are cached per worker process."""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import torch
 from numpy.typing import NDArray
 
-from pioneer.io import atomic_path
+from pioneer.imitation.store import file_version, save_episode
 
-__all__ = ["clear_cache", "collect_episode", "collect_task", "worker_init"]
+__all__ = ["clear_cache", "collect_episode", "collect_task"]
 
 _CACHE: dict[tuple[str, str], Any] = {}
 
@@ -36,8 +34,8 @@ def _teacher(scenario: str, reward: str) -> Any:
 
 
 def _student(checkpoint: str) -> Any:
-    st = os.stat(checkpoint)  # a rewritten file (a recreated run folder) is a new student
-    key = ("student", f"{checkpoint}:{st.st_mtime_ns}:{st.st_size}")
+    path, mtime, size = file_version(checkpoint)  # a rewritten file (a recreated run) is new
+    key = ("student", f"{path}:{mtime}:{size}")
     if key not in _CACHE:
         from pioneer.learn.policy import make_student_policy
 
@@ -119,15 +117,7 @@ def collect_episode(
 
 
 def collect_task(args: tuple[str, str, str | None, int, str, str]) -> str:
+    """Collect one episode (:func:`collect_episode`) and write it to its path: the
+    :class:`pioneer.imitation.rounds.Collector` function of DAgger's students."""
     scenario, reward, checkpoint, env_seed, path, label_prev = args
-    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **ep)
-    return path
-
-
-def worker_init() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1, user_api="blas")
-    torch.set_num_threads(1)
+    return save_episode(path, collect_episode(scenario, reward, checkpoint, env_seed, label_prev))

@@ -8,9 +8,10 @@ round 0). All labelled frames are aggregated and the student is retrained after 
 Labels are the teacher's smoothed command u_t = α u* + (1 − α) u_{t−1}, u_{t−1} the command
 applied (a frame's label is what the teacher would send had it been driving).
 
-Output directory (everything written atomically; a rerun of the same command resumes; one run
-writes to it at a time, :func:`pioneer.io.run_lock`; every input, the reward file included,
-is checked before the folder is created or changed)::
+The round loop, the episode files and the resume are :mod:`pioneer.imitation` (shared with
+CrowdNav++'s imitation warm start). Output directory (everything written atomically; a rerun
+of the same command resumes; one run writes to it at a time, :func:`pioneer.io.run_lock`;
+every input, the reward file included, is checked before the folder is created or changed)::
 
     DIR/config.json                      the DaggerConfig (a rerun must match it)
     DIR/scenario.json                    the scenario's full config (a rerun must match it)
@@ -42,8 +43,7 @@ import io
 import json
 import math
 import typing
-from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -57,19 +57,13 @@ from pioneer.config import Config
 from pioneer.data import base_scenario
 from pioneer.deploy.mixture import ActionMode
 from pioneer.errors import ConfigError, expect
+from pioneer.imitation.rounds import Collector, Step, run_rounds
+from pioneer.imitation.rounds import one_thread as _worker_init
+from pioneer.imitation.store import RunFolder
 from pioneer.interrupt import kept
-from pioneer.io import (
-    atomic_path,
-    inside,
-    load_npz,
-    output_dir_kind,
-    run_lock,
-    to_json,
-    write_text_atomic,
-)
+from pioneer.io import atomic_path, inside, output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
-from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
     MDN,
     Student,
@@ -77,16 +71,16 @@ from pioneer.learn.models import (
     StudentKind,
     build_student,
     load_student,
+    read_checkpoint_meta,
     save_student,
     train_student,
 )
-from pioneer.parallel import bounded_map, spawn_pool, worker_count
+from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
 from pioneer.seeds import dagger_seed
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
 
-CONFIG_FILE = "config.json"
 SCENARIO_FILE = "scenario.json"
 FINAL_FILE = "student.safetensors"
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
@@ -138,59 +132,16 @@ class DaggerResult:
     curves: list[dict[str, Any]]
 
 
-# ------------------------------------------------------------------------------ driver
-def _round_dir(out: Path, rnd: int) -> Path:
-    return out / "rounds" / f"round-{rnd:02d}"
+# ------------------------------------------------------------------------------ run folder
+def _folder(out: Path) -> RunFolder:
+    """The run's episodes, rounds' students and settings (older runs' settings files lack
+    later options: their defaults; a rerun may change the number of rounds)."""
+    return RunFolder(out, FINAL_FILE, "DAgger", defaults=DaggerConfig().to_dict(), free=("rounds",))
 
 
-def _episode_path(out: Path, rnd: int, i: int) -> Path:
-    return _round_dir(out, rnd) / f"ep-{i:03d}.npz"
-
-
-def _run_parallel(
-    tasks: list[tuple[str, str, str | None, int, str, str]],
-    pool: ProcessPoolExecutor | None,
-    workers: int,
-) -> Iterator[str]:
-    """Collect ``tasks`` in ``pool`` (in this process when ``None``), yielding as they finish."""
-    if pool is None:
-        for t in tasks:
-            yield _collect_task(t)
-        return
-    yield from bounded_map(pool, _collect_task, tasks, 2 * workers)
-
-
-def _pool(workers: int) -> contextlib.AbstractContextManager[ProcessPoolExecutor | None]:
-    """One process pool for the whole run (workers keep the teacher loaded between rounds)."""
-    if workers <= 1:
-        _worker_init()
-        return contextlib.nullcontext()
-    return spawn_pool(workers, _worker_init)
-
-
-def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
-    """The ``n`` episodes of round ``rnd`` (all must exist)."""
-    fix = "delete that file and rerun the command (it will be collected again)"
-    return [load_npz(_episode_path(out, rnd, i), "DAgger episode", fix) for i in range(n)]
-
-
-def _check_config(out: Path, cfg: DaggerConfig) -> None:
-    """Refuse settings that differ from those of the run in ``out`` (reads only)."""
-    p = out / CONFIG_FILE
-    if p.exists():
-        old = {**DaggerConfig().to_dict(), **json.loads(p.read_text())}  # older runs: defaults
-        mine = cfg.to_dict()
-        fixed = {k: v for k, v in mine.items() if k != "rounds"}
-        if {k: v for k, v in old.items() if k != "rounds"} != fixed:
-            diff = sorted(k for k in fixed if old.get(k) != fixed[k])
-            raise ConfigError(
-                expect(
-                    f"{out}: DAgger settings",
-                    f"the settings of the run already there ({diff} differ)",
-                    {k: mine[k] for k in diff},
-                    "use the same options to resume, or a new --out directory",
-                )
-            )
+def _sizes(cfg: DaggerConfig) -> list[int]:
+    """Episodes of each round."""
+    return [cfg.episodes_in(r) for r in range(cfg.rounds + 1)]
 
 
 def scenario_set(pattern: str) -> list[str]:
@@ -239,50 +190,6 @@ def _check_scenario(out: Path, names: list[str]) -> dict[str, Any] | None:
     return mine if recorded is None else None
 
 
-def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:
-    if not isinstance(model, MDN):
-        return {}
-    with torch.inference_mode():
-        ale, epi = model.uncertainty(torch.as_tensor(obs))
-    return {
-        name: {str(q): float(np.quantile(v.numpy(), q)) for q in QUANTILES}
-        for name, v in (("aleatoric", ale), ("epistemic", epi))
-    }
-
-
-def _eval_loss(model: Student, obs: NDArray[np.float32], act: NDArray[np.float32]) -> float:
-    """Loss of ``model`` on frames it was not trained on (eval mode: dropout off)."""
-    with torch.inference_mode():
-        return float(model.loss(torch.as_tensor(obs), torch.as_tensor(act)))
-
-
-def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
-    if not rows:
-        return
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    w.writeheader()
-    w.writerows(rows)
-    write_text_atomic(out / "curves.csv", buf.getvalue())
-    from pioneer.viz.student import plot_dagger_curves
-
-    plot_dagger_curves(rows, out / "curves.png")
-
-
-def _on_disk(cfg: DaggerConfig, out: Path) -> tuple[int, int]:
-    """The run's episodes and rounds' students already written to ``out``."""
-    rounds = range(cfg.rounds + 1)
-    eps = sum(_episode_path(out, r, i).exists() for r in rounds for i in range(cfg.episodes_in(r)))
-    return eps, sum((_round_dir(out, r) / FINAL_FILE).exists() for r in rounds)
-
-
-def _kept(cfg: DaggerConfig, out: Path) -> str:
-    """What an interrupted run keeps (:func:`pioneer.interrupt.kept`)."""
-    episodes, students = _on_disk(cfg, out)
-    total, rounds = cfg.total_episodes, cfg.rounds + 1
-    return f"{episodes} of {total} episodes and {students} of {rounds} rounds kept in {out}"
-
-
 def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> list[str]:
     """The run's scenarios, after checking every input against them and ``out`` (reads only,
     so a refused run leaves the file system as it was): the reward file loads and fits each
@@ -293,7 +200,7 @@ def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> li
 
     names = scenario_set(cfg.scenario)
     output_dir_kind(out)
-    _check_config(out, cfg)
+    _folder(out).check(cfg.to_dict())
     _check_scenario(out, names)
     if reward is not None:
         model = DensityReward.load(reward)
@@ -322,12 +229,10 @@ def _prepare(
     :func:`_check_inputs`) and return the teacher's reward file per scenario: ``reward`` for
     all, else the one fitted on the shipped demos of the scenario's base
     (:func:`_default_reward_paths`)."""
-    from pioneer.io import remove_partial_writes
-
-    _check_config(out, cfg)  # again, holding the lock
+    folder = _folder(out)
+    folder.check(cfg.to_dict())  # again, holding the lock
     scenarios = _check_scenario(out, names)
-    remove_partial_writes(out / "rounds")  # a killed worker's half-written episode
-    write_text_atomic(out / CONFIG_FILE, to_json(cfg.to_dict(), indent=2) + "\n")
+    folder.prepare(cfg.to_dict())  # a killed worker's half-written episode goes
     if scenarios is not None:
         write_text_atomic(out / SCENARIO_FILE, to_json(scenarios, indent=1) + "\n")
     if reward is not None:
@@ -341,68 +246,116 @@ def _prepare(
     return paths
 
 
+# ------------------------------------------------------------------------------ the method
+Data = tuple[NDArray[np.float32], NDArray[np.float32]]  # observations, teacher labels
+
+
 def _episode_scenario(cfg: DaggerConfig, names: list[str], rnd: int, i: int) -> str:
     """The scenario of episode ``i`` of round ``rnd``: drawn from the run's set by its seed."""
     return names[dagger_seed(cfg.scenario, cfg.seed, rnd, i) % len(names)]
 
 
-def _round_tasks(
-    cfg: DaggerConfig, out: Path, rewards: dict[str, Path], rnd: int
-) -> list[tuple[str, str, str | None, int, str, str]]:
-    """The episodes of round ``rnd`` not yet on disk, as :func:`_collect_task` arguments."""
-    prev_ckpt = None if rnd == 0 else str(_round_dir(out, rnd - 1) / FINAL_FILE)
-    names = sorted(rewards)
-    tasks = []
-    for i in range(cfg.episodes_in(rnd)):
-        if _episode_path(out, rnd, i).exists():
-            continue
-        name = _episode_scenario(cfg, names, rnd, i)
-        seed = dagger_seed(cfg.scenario, cfg.seed, rnd, i)
-        path = str(_episode_path(out, rnd, i))
-        tasks.append((name, str(rewards[name]), prev_ckpt, seed, path, str(cfg.label_prev)))
-    return tasks
+def _quantiles(model: Student, obs: NDArray[np.float32]) -> dict[str, dict[str, float]]:
+    if not isinstance(model, MDN):
+        return {}
+    with torch.inference_mode():
+        ale, epi = model.uncertainty(torch.as_tensor(obs))
+    return {
+        name: {str(q): float(np.quantile(v.numpy(), q)) for q in QUANTILES}
+        for name, v in (("aleatoric", ale), ("epistemic", epi))
+    }
 
 
-def _fit_round(
-    model: Student | None,
-    cfg: DaggerConfig,
-    rnd: int,
-    ckpt: Path,
-    data: tuple[NDArray[np.float32], NDArray[np.float32]],
-) -> tuple[Student, list[float]]:
-    """The round's student (loaded if ``ckpt`` exists, else trained on the aggregate ``data``)
-    and its loss history."""
-    if ckpt.exists():
-        return load_student(ckpt), [float(v) for v in json_info(ckpt).get("loss_history", [])]
-    if model is None:
-        model = build_student(
-            StudentConfig(kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta),
-            seed=cfg.seed,
-        )
-    epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
-    if epochs <= 0:
-        return model, []
-    x, y = data
-    return model, train_student(
-        model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
-    )
-
-
-def _curve_row(
-    rnd: int, eps: list[dict[str, Any]], frames: int, held_out: float, history: list[float]
-) -> dict[str, Any]:
+def _curve_row(step: Step[Data, Student], history: list[float]) -> dict[str, Any]:
+    rnd, eps = step.round, step.episodes
     events = [str(e["event"]) for e in eps]
     return {
         "round": rnd,
         "driver": "teacher" if rnd == 0 else "student",
         "episodes": len(eps),
-        "frames_total": frames,
+        "frames_total": int(step.data[0].shape[0]),
         "success_rate": events.count("success") / len(events),
         "collision_rate": events.count("collision") / len(events),
         "mean_time_s": float(np.mean([float(e["time_s"]) for e in eps])),
-        "loss_new_data": held_out,
+        "loss_new_data": step.loss_new,
         "train_loss": history[-1] if history else math.nan,
     }
+
+
+@dataclasses.dataclass(frozen=True)
+class _Students:
+    """DAgger's parts for the students (:class:`pioneer.imitation.rounds.Method`): episodes
+    labelled by the teacher (:func:`~pioneer.learn.collect.collect_episode`); round 0 trains
+    a fresh network, later rounds go on training the previous one on the whole aggregate."""
+
+    cfg: DaggerConfig
+    rewards: dict[str, Path]  # the teacher's reward file per scenario
+
+    def task(
+        self, rnd: int, index: int, path: Path, driver: Path | None
+    ) -> tuple[str, str, str | None, int, str, str]:
+        cfg = self.cfg
+        name = _episode_scenario(cfg, sorted(self.rewards), rnd, index)
+        seed = dagger_seed(cfg.scenario, cfg.seed, rnd, index)
+        ckpt = None if driver is None else str(driver)
+        return (name, str(self.rewards[name]), ckpt, seed, str(path), str(cfg.label_prev))
+
+    def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
+        obs = np.concatenate([e["obs"] for e in episodes]).astype(np.float32)
+        return obs, np.concatenate([e["action"] for e in episodes]).astype(np.float32)
+
+    def loss(self, model: Student, data: Data) -> float:
+        """``model``'s loss on frames it was not trained on (eval mode: dropout off)."""
+        with torch.inference_mode():
+            return float(model.loss(torch.as_tensor(data[0]), torch.as_tensor(data[1])))
+
+    def fit(self, step: Step[Data, Student]) -> tuple[Student, dict[str, Any]]:
+        cfg, rnd = self.cfg, step.round
+        model = step.previous
+        if model is None:
+            model = build_student(
+                StudentConfig(kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta),
+                seed=cfg.seed,
+            )
+        epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
+        x, y = step.data
+        history: list[float] = []
+        if epochs > 0:
+            history = train_student(
+                model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
+            )
+        info = {
+            "scenario": cfg.scenario,
+            "source": "dagger",
+            "round": rnd,
+            "dagger": cfg.to_dict(),
+            "frames": int(x.shape[0]),
+            "loss_history": history,
+            "uncertainty_quantiles": _quantiles(model, x),
+            "curve_row": _curve_row(step, history),
+        }
+        return model, info
+
+    def save(self, model: Student, path: Path, info: dict[str, Any]) -> None:
+        save_student(model, path, info)
+
+    def load(self, path: Path) -> tuple[Student, dict[str, Any]]:
+        info = read_checkpoint_meta(path)["info"]
+        return load_student(path), dict(info) if isinstance(info, dict) else {}
+
+
+# ------------------------------------------------------------------------------ driver
+def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
+    if not rows:
+        return
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(out / "curves.csv", buf.getvalue())
+    from pioneer.viz.student import plot_dagger_curves
+
+    plot_dagger_curves(rows, out / "curves.png")
 
 
 def run_dagger(
@@ -437,56 +390,32 @@ def _run(
     # depend on --workers or the machine (the networks are small; threads gain little).
     torch.set_num_threads(1)
     clear_cache()
-    total = cfg.total_episodes
-    done, _ = _on_disk(cfg, out)
+    folder, sizes = _folder(out), _sizes(cfg)
     curves: list[dict[str, Any]] = []
-    agg_obs: list[NDArray[np.float32]] = []
-    agg_act: list[NDArray[np.float32]] = []
-    model: Student | None = None
     bar = progress_bar(
-        total=total, initial=done, desc="DAgger episodes", unit="ep", enabled=progress
+        total=cfg.total_episodes,
+        initial=folder.on_disk(sizes)[0],
+        desc="DAgger episodes",
+        unit="ep",
+        enabled=progress,
     )
-    with kept(lambda: _kept(cfg, out)), bar, _pool(n_workers) as pool:
-        for rnd in range(cfg.rounds + 1):
-            bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
-            for _ in _run_parallel(_round_tasks(cfg, out, rewards, rnd), pool, n_workers):
-                bar.update(1)
-            eps = load_round(out, rnd, cfg.episodes_in(rnd))
-            obs = np.concatenate([e["obs"] for e in eps]).astype(np.float32)
-            act = np.concatenate([e["action"] for e in eps]).astype(np.float32)
-            held_out = _eval_loss(model, obs, act) if model is not None else math.nan
-            agg_obs.append(obs)
-            agg_act.append(act)
-            x, y = np.concatenate(agg_obs), np.concatenate(agg_act)
-            ckpt = _round_dir(out, rnd) / FINAL_FILE
-            fitted = ckpt.exists()
-            model, history = _fit_round(model, cfg, rnd, ckpt, (x, y))
-            row = _curve_row(rnd, eps, int(x.shape[0]), held_out, history)
-            if not fitted:
-                info = {
-                    "scenario": cfg.scenario,
-                    "source": "dagger",
-                    "round": rnd,
-                    "dagger": cfg.to_dict(),
-                    "frames": int(x.shape[0]),
-                    "loss_history": history,
-                    "uncertainty_quantiles": _quantiles(model, x),
-                    "curve_row": row,
-                }
-                save_student(model, ckpt, info)
-            curves.append(row)
+
+    def start(rnd: int, todo: int) -> None:
+        bar.set_postfix(round=rnd, driver="teacher" if rnd == 0 else "student")
+
+    collector = Collector(_collect_task, _worker_init, n_workers)
+    rounds = run_rounds(
+        folder, sizes, _Students(cfg, rewards), collector, start, lambda: bar.update(1)
+    )
+    # closing: a stop between two rounds ends the collection's pool at once
+    with kept(lambda: folder.kept(sizes)), bar, contextlib.closing(rounds):
+        for done in rounds:
+            history = [float(v) for v in done.info.get("loss_history", [])]
+            curves.append(_curve_row(done.step, history))
             _write_curves(out, curves)
             if on_round is not None:
-                on_round(row)
+                on_round(curves[-1])
     final = out / FINAL_FILE
     with atomic_path(final) as tmp:
-        tmp.write_bytes((_round_dir(out, cfg.rounds) / FINAL_FILE).read_bytes())
+        tmp.write_bytes(folder.model_path(cfg.rounds).read_bytes())
     return DaggerResult(out, final, curves)
-
-
-def json_info(checkpoint: str | Path) -> dict[str, Any]:
-    """The free-form ``info`` stored in a student checkpoint."""
-    from pioneer.learn.models import read_checkpoint_meta
-
-    info = read_checkpoint_meta(checkpoint)["info"]
-    return dict(info) if isinstance(info, dict) else {}

@@ -2,7 +2,7 @@
 GAE against a brute-force oracle, the reward terms, checkpoints, determinism, the shipped
 weights in the spawned-process harness, the training command end to end with resume (also
 after SIGINT or SIGTERM), and the imitation warm start (teacher actions in the policy's action
-space, cloning, resume after it)."""
+space, cloning, its rounds on disk, resume during and after it)."""
 
 from __future__ import annotations
 
@@ -17,16 +17,11 @@ import numpy as np
 import pytest
 import torch
 
+from pioneer.baselines.crowdnav import collect as crowdnav_collect
 from pioneer.baselines.crowdnav import imitation as crowdnav_bc
-from pioneer.baselines.crowdnav.imitation import (
-    WarmStartConfig,
-    action_from_command,
-    bc_loss,
-    collect_episodes,
-    load_bc_data,
-    save_bc_data,
-    train_bc,
-)
+from pioneer.baselines.crowdnav.bc_data import BCData
+from pioneer.baselines.crowdnav.collect import action_from_command, collect_episode, episode_seeds
+from pioneer.baselines.crowdnav.imitation import WarmStartConfig, bc_loss, train_bc, warm_start
 from pioneer.baselines.crowdnav.network import (
     CHECKPOINT_FORMAT,
     CrowdNavConfig,
@@ -53,6 +48,7 @@ from pioneer.sim.world import step
 from pioneer_testutils import (
     STOP_SIGNALS,
     assert_house_message,
+    file_tree,
     interrupted_line,
     make_state,
     open_world,
@@ -440,8 +436,8 @@ def teacher_episode():
     sc = get_scenario("hr-rl-compact")  # a world where this teacher episode succeeds
     world = sc.world()
     cfg = CrowdNavConfig(max_humans=3)
-    data = collect_episodes(sc, world, make_teacher("hr-rl-compact"), [123], cfg)
-    return sc, world, cfg, data
+    ep = collect_episode(sc, world, make_teacher("hr-rl-compact"), 123, cfg)
+    return sc, world, cfg, BCData.from_episodes([{**ep, "round": np.array(0)}])
 
 
 def test_action_from_command_inverts_command_from_action():
@@ -477,7 +473,7 @@ def test_teacher_episode_replays_through_the_action_space(teacher_episode):
     assert summary["teacher_clipped_fraction"] < 0.2
 
 
-def test_bc_reduces_imitation_loss_and_data_round_trip(teacher_episode, tmp_path):
+def test_bc_reduces_imitation_loss(teacher_episode):
     data = teacher_episode[3]
     small = CrowdNavConfig(max_humans=3, embed=16, hidden=16, head_hidden=16)
     warm = WarmStartConfig(bc_episodes=1, bc_epochs=40, bc_lr=1e-2)
@@ -489,14 +485,6 @@ def test_bc_reduces_imitation_loss_and_data_round_trip(teacher_episode, tmp_path
     again, losses2 = train_bc(data, small, warm, seed=0)  # seeded: identical
     assert losses == losses2
     assert all(torch.equal(v, again.state_dict()[k]) for k, v in model.state_dict().items())
-    p = save_bc_data(data, tmp_path / "d.npz", {"settings": {"x": 1}})
-    back, meta = load_bc_data(p)
-    assert meta["settings"] == {"x": 1}
-    for k, v in data.fields().items():
-        np.testing.assert_array_equal(getattr(back, k), v)
-    (tmp_path / "bad.npz").write_bytes(b"nope")
-    with pytest.raises(DataError):
-        load_bc_data(tmp_path / "bad.npz")
     with pytest.raises(ConfigError):
         WarmStartConfig(dagger_rounds=1)
 
@@ -513,13 +501,13 @@ def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monke
     def boom(*args, **kwargs):
         raise AssertionError("the imitation phase was redone")
 
-    monkeypatch.setattr(crowdnav_bc, "collect_episodes", boom)
+    monkeypatch.setattr(crowdnav_collect, "collect_episode", boom)
     monkeypatch.setattr(crowdnav_bc, "train_bc", boom)
     assert _train(a, 120, *warm, "--resume") == 0  # from the checkpoint
     # Interrupted after imitation, before any PPO checkpoint: its files are reused.
     c.mkdir()
-    for name in ("bc_data.npz", "bc_policy.safetensors"):
-        shutil.copy(a / name, c / name)
+    shutil.copytree(a / "imitation", c / "imitation")
+    shutil.copy(a / "bc_policy.safetensors", c / "bc_policy.safetensors")
     assert _train(c, 120, *warm) == 0
     for out in (a, c):
         assert _curve(out) == _curve(b)
@@ -530,3 +518,102 @@ def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monke
     assert _train(a, 180, "--bc-episodes", "3", "--bc-epochs", "2", "--critic-warmup", "1") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bc_episodes" in err[0]
+
+
+# ------------------------------------------------------------------------- imitation rounds
+SMALL = CrowdNavConfig(max_humans=3, embed=16, hidden=16, head_hidden=16)
+WARM = WarmStartConfig(bc_episodes=2, bc_epochs=2, dagger_rounds=2, dagger_episodes=1)
+
+
+def _warm(out, config=WARM, **kwargs):
+    sc = get_scenario("hr-rl")
+    return warm_start(sc, SMALL, config, 0, out, progress=False, **kwargs)
+
+
+def _same_weights(a, b):
+    sa, sb = a.state_dict(), b.state_dict()
+    return list(sa) == list(sb) and all(torch.equal(v, sb[k]) for k, v in sa.items())
+
+
+@pytest.fixture(scope="module")
+def warm_run(tmp_path_factory):
+    """An uninterrupted imitation phase: 2 expert episodes, 2 DAgger rounds of 1."""
+    out = tmp_path_factory.mktemp("warm") / "run"
+    model, info = _warm(out)
+    return out, model, info
+
+
+def test_imitation_rounds_are_stored_one_episode_per_file(warm_run):
+    out, model, info = warm_run
+    rounds = out / "imitation" / "rounds"
+    assert sorted(str(p.relative_to(rounds)) for p in rounds.rglob("*")) == [
+        "round-00", "round-00/ep-000.npz", "round-00/ep-001.npz", "round-00/policy.safetensors",
+        "round-01", "round-01/ep-000.npz", "round-01/policy.safetensors",
+        "round-02", "round-02/ep-000.npz", "round-02/policy.safetensors",
+    ]  # fmt: skip
+    settings = json.loads((out / "imitation" / "config.json").read_text())
+    assert settings == info["settings"] and settings["dagger_rounds"] == 2
+    assert info["data"]["episodes"] == 4 and set(info["data"]) >= {"round0", "round1", "round2"}
+    # the clone is the last round's; each round's is a fresh fit on the rounds so far
+    assert _same_weights(model, load_crowdnav(rounds / "round-02" / "policy.safetensors"))
+    first = read_crowdnav_meta(rounds / "round-00" / "policy.safetensors")["info"]
+    assert first["round"] == 0 and first["data"]["episodes"] == 2
+    assert first["driver_loss_on_round"] is None  # nobody drove round 0 but the expert
+    later = read_crowdnav_meta(rounds / "round-01" / "policy.safetensors")["info"]
+    assert later["driver_loss_on_round"] > 0
+    with np.load(rounds / "round-01" / "ep-000.npz", allow_pickle=False) as f:
+        assert int(f["round"]) == 1 and str(f["event"]) in {"success", "collision", "timeout"}
+
+
+def test_an_interrupted_imitation_resumes_to_the_same_clone(warm_run, tmp_path, monkeypatch):
+    """Episodes and clones on disk are reused; a missing episode is collected again and the
+    clones from its round on refitted, to the uninterrupted run's weights."""
+    out, model, _ = warm_run
+    run = tmp_path / "run"
+    shutil.copytree(out / "imitation", run / "imitation")
+    rounds = run / "imitation" / "rounds"
+    (rounds / "round-01" / "ep-000.npz").unlink()
+    for r in (1, 2):
+        (rounds / f"round-{r:02d}" / "policy.safetensors").unlink()
+    (rounds / "round-02" / ".ep-000.npz.abcd1234.npz").write_bytes(b"half")  # a killed write
+    collected = []
+    real = crowdnav_collect.collect_episode
+    monkeypatch.setattr(
+        crowdnav_collect, "collect_episode", lambda *a, **k: collected.append(a[3]) or real(*a, **k)
+    )
+    again, _ = _warm(run)
+    assert collected == [episode_seeds(0, 1, 1)[0]]
+    assert _same_weights(model, again)
+    assert not list(run.rglob(".*.npz"))
+    for p in sorted((out / "imitation" / "rounds").rglob("ep-*.npz")):
+        with np.load(p) as x, np.load(run / p.relative_to(out)) as y:
+            for k in x.files:
+                np.testing.assert_array_equal(x[k], y[k], err_msg=f"{p}:{k}")
+
+
+def test_an_imitation_of_other_settings_is_refused_before_writing(warm_run, tmp_path):
+    out, _, _ = warm_run
+    run = tmp_path / "run"
+    shutil.copytree(out / "imitation", run / "imitation")
+    before = file_tree(run)
+    with pytest.raises(ConfigError) as err:
+        _warm(run, WarmStartConfig(bc_episodes=2, bc_epochs=3, dagger_rounds=2, dagger_episodes=1))
+    assert_house_message(str(err.value), "bc_epochs", "'bc_epochs': 2", "--out")
+    assert file_tree(run) == before
+    # more rounds extend the run
+    _, info = _warm(run, WARM.replace(dagger_rounds=3))
+    assert info["data"]["episodes"] == 5
+
+
+@pytest.mark.slow
+def test_imitation_episodes_collected_by_two_workers_are_the_same(warm_run, tmp_path):
+    out, model, _ = warm_run
+    try:
+        again, _ = _warm(tmp_path / "w2", workers=2)
+    finally:
+        torch.set_num_threads(1)  # the run sets one torch thread per worker in this process
+    assert _same_weights(model, again)
+    for p in sorted((out / "imitation" / "rounds").rglob("ep-*.npz")):
+        with np.load(p) as x, np.load(tmp_path / "w2" / p.relative_to(out)) as y:
+            for k in x.files:
+                np.testing.assert_array_equal(x[k], y[k], err_msg=f"{p}:{k}")

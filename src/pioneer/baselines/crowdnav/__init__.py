@@ -2,7 +2,8 @@
 
 Modules: :mod:`.observation` (graph observation, action → command), :mod:`.network`
 (actor–critic, checkpoints), :mod:`.policy` (the ``crowdnav++`` policy), :mod:`.ppo` (the
-original's training recipe), :mod:`.imitation` (an optional behaviour-cloning warm start);
+original's training recipe), :mod:`.imitation` (an optional behaviour-cloning warm start;
+its episodes: :mod:`.collect`, :mod:`.bc_data`);
 the reward is :mod:`pioneer.reward.crowdnav` (the Gymnasium environment's reward too).
 
 Baseline ``crowdnav++`` of the paper's Table I: "Intention aware robot crowd navigation with

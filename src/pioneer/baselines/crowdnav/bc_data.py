@@ -1,23 +1,23 @@
-"""The imitation data of CrowdNav++'s warm start: teacher-labelled steps as one ``.npz`` with
-JSON metadata (no pickle), and its reader (:mod:`pioneer.baselines.crowdnav.imitation`)."""
+"""The imitation data of CrowdNav++'s warm start (:mod:`pioneer.baselines.crowdnav.imitation`):
+teacher-labelled episodes, stored one ``.npz`` each (:mod:`pioneer.imitation.store`), and
+their aggregate :class:`BCData`."""
 
 from __future__ import annotations
 
 import dataclasses
-import json
-from pathlib import Path
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.errors import DataError, expect
-from pioneer.io import atomic_path, load_npz
 from pioneer.sim.events import Event
 
-__all__ = ["DATA_FORMAT", "BCData", "load_bc_data", "save_bc_data"]
+__all__ = ["STEP_KEYS", "BCData"]
 
-DATA_FORMAT = "pioneer.crowdnav-bc/1"
+# The per-step arrays of an episode file and of BCData; an episode file also holds its
+# ``event`` ("success", "collision", "timeout"), ``env_seed`` and ``round``.
+STEP_KEYS = ("robot", "temporal", "spatial", "mask", "action", "teacher_command", "command")
 
 
 @dataclasses.dataclass
@@ -36,39 +36,25 @@ class BCData:
     ep_round: NDArray[np.int64]  # (E,) 0: teacher-driven, r ≥ 1: DAgger round r
     ep_event: NDArray[np.int8]  # (E,) 1 success, 2 collision, 3 timeout
 
-    def fields(self) -> dict[str, NDArray[Any]]:
-        """The arrays by name."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+    @staticmethod
+    def from_episodes(episodes: Sequence[Mapping[str, Any]]) -> BCData:
+        """The ``episodes`` (the arrays of their files) one after the other."""
+        steps = {k: np.concatenate([e[k] for e in episodes]) for k in STEP_KEYS}
+        index = [np.full(len(e["action"]), i, dtype=np.int64) for i, e in enumerate(episodes)]
+        return BCData(
+            **steps,
+            episode=np.concatenate(index),
+            ep_seed=np.asarray([int(e["env_seed"]) for e in episodes], dtype=np.int64),
+            ep_round=np.asarray([int(e["round"]) for e in episodes], dtype=np.int64),
+            ep_event=np.asarray(
+                [int(Event[str(e["event"]).upper()]) for e in episodes], dtype=np.int8
+            ),
+        )
 
     @property
     def n_episodes(self) -> int:
         """E."""
         return int(self.ep_seed.shape[0])
-
-    def rounds(self, below: int) -> BCData:
-        """The episodes of rounds < ``below``."""
-        keep_ep = np.flatnonzero(self.ep_round < below)
-        remap = np.full(self.n_episodes, -1, dtype=np.int64)
-        remap[keep_ep] = np.arange(keep_ep.size)
-        rows = remap[self.episode] >= 0
-        per_step = {k: v[rows] for k, v in self.fields().items() if not k.startswith("ep_")}
-        per_step["episode"] = remap[self.episode[rows]]
-        per_ep = {k: v[keep_ep] for k, v in self.fields().items() if k.startswith("ep_")}
-        return BCData(**per_step, **per_ep)
-
-    @staticmethod
-    def concat(parts: list[BCData]) -> BCData:
-        """The episodes of ``parts`` one after the other."""
-        out: dict[str, NDArray[Any]] = {}
-        offset = 0
-        eps = []
-        for p in parts:
-            eps.append(p.episode + offset)
-            offset += p.n_episodes
-        for k in parts[0].fields():
-            out[k] = np.concatenate([getattr(p, k) for p in parts])
-        out["episode"] = np.concatenate(eps)
-        return BCData(**out)
 
     def summary(self) -> dict[str, Any]:
         """Episode outcomes per round and how much the clipping changed the teacher."""
@@ -86,30 +72,3 @@ class BCData:
             out["teacher_clipped_fraction"] = float(np.mean(np.any(diff[t] > 1e-9, axis=1)))
             out["teacher_clip_mean_abs"] = [float(x) for x in diff[t].mean(axis=0)]
         return out
-
-
-def save_bc_data(data: BCData, path: str | Path, meta: dict[str, Any]) -> Path:
-    """Write ``data`` to ``.npz`` (atomically) with ``meta`` as JSON text (no pickle)."""
-    p = Path(path)
-    full = {"format": DATA_FORMAT, **meta}
-    with atomic_path(p) as tmp, tmp.open("wb") as fh:
-        arrays: dict[str, Any] = {
-            "meta": np.array(json.dumps(full, sort_keys=True)),
-            **data.fields(),
-        }
-        np.savez(fh, **arrays)
-    return p
-
-
-def load_bc_data(path: str | Path) -> tuple[BCData, dict[str, Any]]:
-    """The dataset and meta written by :func:`save_bc_data`; a bad file raises DataError."""
-    fix = "delete it or use a new --out (it is not a CrowdNav++ imitation dataset)"
-    raw = load_npz(path, "CrowdNav++ imitation data", fix)
-    try:
-        meta = json.loads(str(raw.pop("meta")))
-        data = BCData(**raw)
-    except (KeyError, TypeError, json.JSONDecodeError) as exc:
-        raise DataError(expect(f"{path}", "the fields of BCData", sorted(raw), fix)) from exc
-    if meta.get("format") != DATA_FORMAT:
-        raise DataError(expect(f"{path}: format", DATA_FORMAT, meta.get("format"), fix))
-    return data, meta

@@ -11,7 +11,7 @@ trains by RL alone; docs/baselines.md reports both.
 Demonstrations in the policy's action space
     The teacher drives the scenario *through the policy's action space*: at every step its
     command u* = ``teacher.decide(world, state, prev=state.command[0]).command`` is mapped to
-    the raw action a (:func:`action_from_command`, the inverse of
+    the raw action a (:func:`~.collect.action_from_command`, the inverse of
     :func:`~.observation.command_from_action`): Δv = v* − v_{t−1} and Δθ = ω* Δt,
     clipped to the increment bounds and scaled onto [−1, 1]², and the command that a produces
     is the one applied. A policy that replays the recorded actions from the episode's initial
@@ -31,7 +31,9 @@ Behaviour cloning (:func:`train_bc`)
 
 DAgger (Ross et al. 2011), ``dagger_rounds`` > 0
     Round r lets the policy cloned from rounds < r drive (mean action) for ``dagger_episodes``
-    episodes, labels every visited state with the teacher's action and aggregates.
+    episodes, labels every visited state with the teacher's action and aggregates. The rounds,
+    their files and the resume are :mod:`pioneer.imitation` (shared with the students'
+    DAgger): every round's clone is a fresh model fitted on the aggregate of rounds 0..r.
 
 Critic warm-up (in :mod:`pioneer.baselines.crowdnav.ppo`)
     ``critic_warmup`` PPO updates train only the critic head (its own Adam, ``critic_lr``) on
@@ -39,29 +41,32 @@ Critic warm-up (in :mod:`pioneer.baselines.crowdnav.ppo`)
     first policy updates use sensible advantages instead of a random critic's.
 
 Files (in the training ``out``; written atomically, no pickle)
-    ``bc_data.npz``             the aggregated dataset, with its settings as JSON (``meta``);
-                                collection resumes at the first missing round (the teacher's
-                                round is kept when only the cloning settings changed);
-    ``bc_policy.safetensors``   the cloned policy (:func:`~.network.load_crowdnav`);
-                                when present the imitation phase is not redone.
+    ``imitation/config.json``   the phase's settings; a rerun with others is refused;
+    ``imitation/rounds/round-RR/ep-EEE.npz``  one labelled episode (:mod:`.bc_data`); a rerun
+                                collects only the missing ones;
+    ``imitation/rounds/round-RR/policy.safetensors``  the clone fitted on rounds 0..RR (the
+                                next round's driver);
+    ``bc_policy.safetensors``   the cloned policy (the last round's clone,
+                                :func:`~.network.load_crowdnav`); when present the imitation
+                                phase is not redone.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
-import json
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
-from pioneer.baselines.crowdnav.bc_data import BCData, load_bc_data, save_bc_data
+from pioneer.baselines.crowdnav.bc_data import BCData
+from pioneer.baselines.crowdnav.collect import CollectTask, clear_cache, collect_task, episode_seeds
 from pioneer.baselines.crowdnav.network import (
     CrowdNavConfig,
     CrowdNavNet,
@@ -69,36 +74,26 @@ from pioneer.baselines.crowdnav.network import (
     read_crowdnav_meta,
     save_crowdnav,
 )
-from pioneer.baselines.crowdnav.observation import (
-    build_observation,
-    command_from_action,
-    obs_tensors,
-)
 from pioneer.config import Config, check_positive
-from pioneer.envs.policy import Planner
 from pioneer.errors import ConfigError, expect
+from pioneer.imitation.rounds import Collector, Fitted, Step, one_thread, run_rounds
+from pioneer.imitation.store import RunFolder, check_settings
+from pioneer.interrupt import kept
 from pioneer.io import to_json
-from pioneer.sim.events import Event
 from pioneer.sim.scenarios import ScenarioConfig
-from pioneer.sim.world import State, World
 
 __all__ = [
     "BCData",
     "WarmStartConfig",
-    "action_from_command",
     "bc_loss",
-    "collect_episodes",
-    "episode_seeds",
-    "load_bc_data",
-    "save_bc_data",
     "train_bc",
     "warm_start",
 ]
 
-DATA_FILE = "bc_data.npz"
+DATA_DIR = "imitation"
+ROUND_POLICY_FILE = "policy.safetensors"
 POLICY_FILE = "bc_policy.safetensors"
 EXPERTS = ("sfm", "dwa", "teacher")
-F64 = NDArray[np.float64]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,134 +145,6 @@ class WarmStartConfig(Config):
     def active(self) -> bool:
         """Whether anything differs from pure PPO."""
         return self.bc_episodes > 0 or self.critic_warmup > 0
-
-
-# ------------------------------------------------------------------------------ actions
-def action_from_command(
-    command: NDArray[np.floating],
-    v_prev: NDArray[np.floating],
-    dt: float,
-    config: CrowdNavConfig,
-) -> F64:
-    """Raw actions ``(B, 2)`` in [−1, 1]² whose commands come closest to ``command`` ``(B, 2)``.
-
-    The inverse of :func:`~.observation.command_from_action`: Δv = v − v_prev and
-    Δθ = ω Δt, each scaled by the bound on its side (0 ↦ 0) and clipped to [−1, 1].
-    """
-    u = np.asarray(command, dtype=np.float64).reshape(-1, 2)
-    inc = np.stack([u[:, 0] - np.asarray(v_prev, dtype=np.float64).reshape(-1), u[:, 1] * dt], -1)
-    lo = np.array([config.dv_range[0], config.dtheta_range[0]])
-    hi = np.array([config.dv_range[1], config.dtheta_range[1]])
-    a = np.where(inc >= 0.0, inc / hi, inc / -lo)
-    return np.clip(a, -1.0, 1.0)
-
-
-# ------------------------------------------------------------------------------ collection
-class _Imitation:
-    """The episode's driver: the teacher (its clipped action) or the model's mean action
-    (DAgger), with every step's observation, teacher label and applied command kept."""
-
-    name = "crowdnav-imitation"
-
-    def __init__(
-        self, teacher: Any, net_cfg: CrowdNavConfig, model: CrowdNavNet | None, world: World
-    ) -> None:
-        self.teacher, self.net_cfg, self.model, self.world = teacher, net_cfg, model, world
-        self.cols: dict[str, list[Any]] = {
-            k: []
-            for k in (
-                "robot",
-                "temporal",
-                "spatial",
-                "mask",
-                "action",
-                "teacher_command",
-                "command",
-            )
-        }
-        self._h: Any = None
-
-    def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
-        self._h = self.model.initial_state(1) if self.model is not None else None
-
-    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
-        s: State = info["state"]
-        world, sim, net_cfg = self.world, self.world.sim, self.net_cfg
-        graph = build_observation(s, world, net_cfg)
-        u_star = expert_command(self.teacher, world, s)
-        a_star = action_from_command(u_star, s.command[:, 0], sim.dt, net_cfg)
-        if self.model is None:
-            a = a_star
-        else:
-            with torch.inference_mode():
-                mean, _, self._h = self.model(*obs_tensors(graph), self._h)
-            a = mean.numpy().astype(np.float64)
-        cmd = command_from_action(a, s.command[:, 0], sim.robot, sim.dt, net_cfg)
-        for k, x in zip(("robot", "temporal", "spatial", "mask"), graph, strict=True):
-            self.cols[k].append(x)
-        self.cols["action"].append(a_star.astype(np.float32))
-        self.cols["teacher_command"].append(u_star.reshape(1, 2))
-        self.cols["command"].append(cmd)
-        return np.asarray(cmd[0], dtype=np.float64)
-
-
-def collect_episodes(
-    scenario: ScenarioConfig,
-    world: World,
-    teacher: Any,
-    seeds: list[int],
-    net_cfg: CrowdNavConfig,
-    model: CrowdNavNet | None = None,
-    round_index: int = 0,
-) -> BCData:
-    """Run one episode per seed and label every step with the teacher's action.
-
-    ``model`` ``None``: the teacher drives through the policy's action space (its clipped
-    action is applied); otherwise the model's mean action drives (DAgger).
-    """
-    from pioneer.envs.env import NavEnv
-    from pioneer.envs.episode import Episode
-
-    env = NavEnv(scenario)
-    driver = _Imitation(teacher, net_cfg, model, world)
-    episode: list[NDArray[np.int64]] = []
-    events: list[int] = []
-    for e, seed in enumerate(seeds):
-        run = Episode(env, driver, int(seed))
-        run.run()
-        events.append(int(Event[str(run.event).upper()]))
-        episode.append(np.full(run.steps, e, dtype=np.int64))
-    return BCData(
-        **{k: np.concatenate(v) for k, v in driver.cols.items()},
-        episode=np.concatenate(episode),
-        ep_seed=np.asarray(seeds, dtype=np.int64),
-        ep_round=np.full(len(seeds), round_index, dtype=np.int64),
-        ep_event=np.asarray(events, dtype=np.int8),
-    )
-
-
-def expert_command(expert: Planner, world: World, state: State) -> F64:
-    """The demonstrator's command ``(v, ω)`` in ``state``, smoothed (the lookahead teacher)
-    from the command applied on the last step."""
-    return np.asarray(expert.decide(world, state, prev=state.command[0]).command, np.float64)
-
-
-def make_expert(name: str, scenario: str) -> Any:
-    """The demonstrator ``name`` (one of :data:`EXPERTS`) for ``scenario``."""
-    from pioneer.control.registry import build_policy
-
-    if name == "teacher":
-        from pioneer.control.teacher import make_teacher
-
-        return make_teacher(scenario)
-
-    return build_policy(name, scenario)
-
-
-def episode_seeds(seed: int, round_index: int, n: int) -> list[int]:
-    """Initial-state seeds of round ``round_index`` (independent of the other rounds)."""
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xBC, round_index]))
-    return [int(x) for x in rng.integers(2**62, size=n)]
 
 
 # ------------------------------------------------------------------------------ cloning
@@ -376,62 +243,49 @@ def bc_loss(model: CrowdNavNet, data: BCData) -> float:
 
 
 # ------------------------------------------------------------------------------ the phase
-_SETTINGS_FIX = "use a new --out (it holds an imitation phase of other settings)"
+@dataclasses.dataclass(frozen=True)
+class _Cloning:
+    """The warm start's DAgger parts (:class:`pioneer.imitation.rounds.Method`): episodes
+    labelled by the expert (:func:`~.collect.collect_task`), each round's clone a fresh model
+    fitted on the aggregate (:func:`train_bc`)."""
 
+    scenario: ScenarioConfig
+    net_cfg: CrowdNavConfig
+    config: WarmStartConfig
+    seed: int
 
-def _check_settings(where: Path, stored: Any, mine: dict[str, Any]) -> None:
-    """Refuse to resume from ``where`` if its stored settings differ from this run's."""
-    mine = json.loads(json.dumps(mine))
-    if stored != mine:
-        stored = stored if isinstance(stored, dict) else {}
-        diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
-        raise ConfigError(
-            expect(
-                f"{where}: settings",
-                "this command's",
-                {k: stored.get(k) for k in diff},
-                _SETTINGS_FIX,
-            )
-        )
+    def sizes(self) -> list[int]:
+        """Episodes of each round."""
+        cfg = self.config
+        return [cfg.bc_episodes] + [cfg.dagger_episodes] * cfg.dagger_rounds
 
+    def task(self, rnd: int, index: int, path: Path, driver: Path | None) -> CollectTask:
+        seed = episode_seeds(self.seed, rnd, self.sizes()[rnd])[index]
+        clone = None if driver is None else str(driver)
+        return (self.scenario, self.config.expert, self.net_cfg, rnd, seed, clone, str(path))
 
-def _collect_rounds(
-    scenario: ScenarioConfig,
-    net_cfg: CrowdNavConfig,
-    config: WarmStartConfig,
-    seed: int,
-    keys: tuple[Path, dict[str, Any], dict[str, Any]],
-    log: Callable[[str], None] | None,
-) -> BCData:
-    """Teacher episodes and the DAgger rounds, resumed from (and appended to) the data file."""
-    path, settings, clone = keys
-    data: BCData | None = None
-    if path.is_file():
-        data, meta = load_bc_data(path)
-        _check_settings(path, meta.get("settings"), settings)
-        if meta.get("clone") != json.loads(json.dumps(clone)):
-            data = data.rounds(1)  # the teacher's episodes stay valid, the DAgger rounds not
-    world = scenario.world()
-    teacher = make_expert(config.expert, scenario.name)
-    for r in range(config.dagger_rounds + 1):
-        if data is not None and np.any(data.ep_round == r):
-            continue
-        n = config.bc_episodes if r == 0 else config.dagger_episodes
-        driver = None
-        if r > 0:
-            assert data is not None
-            driver, _ = train_bc(data.rounds(r), net_cfg, config, seed)
-        if log is not None:
-            log(f"imitation: round {r}, {n} episodes ({'teacher' if r == 0 else 'DAgger'})")
-        part = collect_episodes(
-            scenario, world, teacher, episode_seeds(seed, r, n), net_cfg, driver, r
-        )
-        data = part if data is None else BCData.concat([data, part])
-        save_bc_data(data, path, {"settings": settings, "clone": clone})
-        if log is not None:
-            log(f"imitation: {to_json(data.summary())}")
-    assert data is not None
-    return data.rounds(config.dagger_rounds + 1)
+    def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> BCData:
+        return BCData.from_episodes(episodes)
+
+    def loss(self, model: CrowdNavNet, data: BCData) -> float:
+        return bc_loss(model, data)
+
+    def fit(self, step: Step[BCData, CrowdNavNet]) -> tuple[CrowdNavNet, dict[str, Any]]:
+        model, losses = train_bc(step.data, self.net_cfg, self.config, self.seed)
+        info = {
+            "round": step.round,
+            "data": step.data.summary(),
+            "bc_loss": [round(x, 6) for x in losses],
+            "log_std": [float(x) for x in model.log_std.detach()],
+            "driver_loss_on_round": step.loss_new,
+        }
+        return model, info
+
+    def save(self, model: CrowdNavNet, path: Path, info: dict[str, Any]) -> None:
+        save_crowdnav(model, path, info)
+
+    def load(self, path: Path) -> tuple[CrowdNavNet, dict[str, Any]]:
+        return load_crowdnav(path), dict(read_crowdnav_meta(path)["info"])
 
 
 def warm_start(
@@ -442,9 +296,11 @@ def warm_start(
     out: Path,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    workers: int = 1,
 ) -> tuple[CrowdNavNet, dict[str, Any]]:
     """The imitation phase, resumable: the cloned model and its summary (``out`` files in the
-    module docstring). A complete ``bc_policy.safetensors`` of the same settings is reused."""
+    module docstring). A complete ``bc_policy.safetensors`` of the same settings is reused.
+    ``workers`` > 1 collects the episodes in that many spawned processes."""
     if log is None:
         log = functools.partial(print, flush=True)
     settings = {
@@ -454,34 +310,52 @@ def warm_start(
         "bc_episodes": config.bc_episodes,
         "dagger_episodes": config.dagger_episodes,
         "expert": config.expert,
-    }
-    # The DAgger rounds' data depends on the cloning settings too (their drivers are clones).
-    clone = {
         "bc_epochs": config.bc_epochs,
         "bc_batch": config.bc_batch,
         "bc_lr": config.bc_lr,
         "min_std": config.min_std,
+        "dagger_rounds": config.dagger_rounds,
     }
-    train_settings = {**settings, **clone, "dagger_rounds": config.dagger_rounds}
     pol = out / POLICY_FILE
     if pol.is_file():
         info = read_crowdnav_meta(pol)["info"]
-        _check_settings(pol, info.get("settings"), train_settings)
+        stored = info.get("settings")
+        check_settings(str(pol), stored if isinstance(stored, dict) else {}, settings, "imitation")
         return load_crowdnav(pol), info
     t0 = time.perf_counter()
-    keys = (out / DATA_FILE, settings, clone)
-    data = _collect_rounds(scenario, net_cfg, config, seed, keys, log if progress else None)
-    model, losses = train_bc(data, net_cfg, config, seed)
-    if progress:
-        log(f"imitation: cloned, loss {losses[0]:.4f} -> {losses[-1]:.4f}")
-    info = {
-        "scenario": scenario.name,
-        "phase": "imitation",
-        "settings": train_settings,
-        "data": data.summary(),
-        "bc_loss": [round(x, 6) for x in losses],
-        "log_std": [float(x) for x in model.log_std.detach()],
-        "wall_time_s_this_run": round(time.perf_counter() - t0, 1),
-    }
-    save_crowdnav(model, pol, info)
-    return model, info
+    folder = RunFolder(
+        out / DATA_DIR, ROUND_POLICY_FILE, "CrowdNav++ imitation", free=("dagger_rounds",)
+    )
+    folder.prepare(settings)
+    method = _Cloning(scenario, net_cfg, config, seed)
+    sizes = method.sizes()
+
+    def start(rnd: int, todo: int) -> None:
+        if progress and todo:
+            driver = "teacher" if rnd == 0 else "DAgger"
+            log(f"imitation: round {rnd}, {todo} of {sizes[rnd]} episodes to collect ({driver})")
+
+    clear_cache()  # a new run in this process
+    collector = Collector(collect_task, one_thread if workers > 1 else None, workers)
+    rounds = run_rounds(folder, sizes, method, collector, start)
+    last: Fitted[BCData, CrowdNavNet] | None = None
+    with kept(lambda: folder.kept(sizes)), contextlib.closing(rounds):
+        for last in rounds:
+            if progress and last.fitted:
+                first, final = last.info["bc_loss"][0], last.info["bc_loss"][-1]
+                log(
+                    f"imitation: round {last.step.round} cloned, loss {first:.4f} -> "
+                    f"{final:.4f}; data {to_json(last.step.data.summary())}"
+                )
+        assert last is not None  # round 0 at least
+        info = {
+            "scenario": scenario.name,
+            "phase": "imitation",
+            "settings": settings,
+            "data": last.step.data.summary(),
+            "bc_loss": last.info["bc_loss"],
+            "log_std": [float(x) for x in last.model.log_std.detach()],
+            "wall_time_s_this_run": round(time.perf_counter() - t0, 1),
+        }
+        save_crowdnav(last.model, pol, info)
+    return last.model, info

@@ -49,8 +49,8 @@ Outputs in ``out/`` (each written atomically)
                                 uninterrupted one;
     ``policy.safetensors``      the policy weights (:func:`~.network.load_crowdnav`);
     ``curve.csv`` / ``curve.png``  the learning curve, ``train.json`` the run's summary;
-    ``bc_data.npz`` / ``bc_policy.safetensors``  the imitation data and the cloned policy
-                                (with ``--bc-episodes``).
+    ``imitation/`` / ``bc_policy.safetensors``  the imitation data (one file per episode)
+                                and the cloned policy (with ``--bc-episodes``).
 
 Resuming: running the same command on an ``out`` that holds a checkpoint continues from it
 (``--resume`` insists on one). A larger ``--steps`` extends a finished run; any other setting
@@ -75,7 +75,7 @@ from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.errors import ConfigError, expect
-from pioneer.interrupt import Interrupted, deferred, kept
+from pioneer.interrupt import Interrupted, deferred
 from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.progress import progress_bar
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
@@ -175,10 +175,9 @@ def _imitation(tr: _Trainer, out: Path, fresh: bool, progress: bool) -> dict[str
     from pioneer.baselines.crowdnav.network import read_crowdnav_meta
 
     if fresh:
-        with kept(lambda: f"the finished imitation rounds kept in {out / 'bc_data.npz'}"):
-            model, info = warm_start(
-                tr.scenario, tr.net_cfg, tr.warm, tr.ppo.seed, out, progress=progress
-            )
+        model, info = warm_start(
+            tr.scenario, tr.net_cfg, tr.warm, tr.ppo.seed, out, progress=progress
+        )
         tr.model.load_state_dict(model.state_dict(), strict=True)
         tr.save(out / "checkpoint.safetensors")
         return info
