@@ -107,19 +107,21 @@ def test_one_reward_spin_term_charges_the_heading_change() -> None:
     s0 = sample_state(cfg, np.random.default_rng(0))
     s1 = step(world, s0, np.array([[0.3, 0.5]]))
     rc = CrowdNavRewardConfig()
-    terms, total, event = crowdnav_reward_terms(world, s0, s1, rc)
+    event = classify(s0, s1, world.sim.time_limit)
+    terms, total = crowdnav_reward_terms(world, s0, s1, event, rc)
     w = float(s1.command[0, 1])
     dt, t_ref = cfg.sim.dt, rc.reference_dt
     assert terms["spin"][0] == pytest.approx(rc.spin * (w * dt) ** 2 * t_ref / dt)
     # a second of turning at ω: 1/Δt steps here, 1/T steps of (ω T)² there
     assert terms["spin"][0] / dt == pytest.approx(rc.spin * (w * t_ref) ** 2 / t_ref)
-    per_step = crowdnav_reward_terms(world, s0, s1, CrowdNavRewardConfig(reference_dt=None))[0]
+    per_step = crowdnav_reward_terms(world, s0, s1, event, CrowdNavRewardConfig(reference_dt=None))[
+        0
+    ]
     assert per_step["spin"][0] == pytest.approx(rc.spin * (w * dt) ** 2)
     env = NavEnv("hr-rl")
     env.reset(options={"state": s0})
     _, r, *_ = env.step([0.3, 0.5])
     assert r == float(total[0])
-    assert event[0] == classify(s0, s1, cfg.sim.time_limit)[0]
 
 
 def test_classify_counts_only_this_step_and_collision_wins() -> None:

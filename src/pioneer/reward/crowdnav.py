@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import Positive
 from pioneer.config import Config
-from pioneer.sim.events import Event, classify
+from pioneer.sim.events import Event
 from pioneer.sim.world import State, World
 
 __all__ = ["CrowdNavReward", "CrowdNavRewardConfig", "crowdnav_reward", "crowdnav_reward_terms"]
@@ -97,17 +97,11 @@ def _constants(rc: CrowdNavRewardConfig, dt: float) -> tuple[float, F64, F64]:
 
 
 def _parts(
-    world: World,
-    prev: State,
-    new: State,
-    rc: CrowdNavRewardConfig,
-    event: NDArray[np.int8] | None = None,
+    world: World, prev: State, new: State, event: NDArray[np.int8], rc: CrowdNavRewardConfig
 ) -> _Parts:
     sim = world.sim
     dt = sim.dt
     per_step, ks, pen = _constants(rc, dt)
-    if event is None:
-        event = classify(prev, new, sim.time_limit)
     collided, reached = event == _COLLISION, event == _SUCCESS
     d0 = _norm2(prev.goal - prev.robot[:, :2])
     d1 = _norm2(new.goal - new.robot[:, :2])
@@ -134,14 +128,14 @@ def crowdnav_reward_terms(
     world: World,
     prev: State,
     new: State,
+    event: NDArray[np.int8],
     config: CrowdNavRewardConfig,
-    event: NDArray[np.int8] | None = None,
-) -> tuple[dict[str, F64], F64, NDArray[np.int8]]:
-    """Per-term rewards ``{name: (B,)}``, their total ``(B,)`` and the event codes ``(B,)``
-    (:class:`~pioneer.sim.events.Event`) of the step ``prev → new`` (``event``: the codes when
-    the caller has classified the step already)."""
+) -> tuple[dict[str, F64], F64]:
+    """Per-term rewards ``{name: (B,)}`` and their total ``(B,)`` of the step ``prev → new``
+    whose event codes ``(B,)`` the world gave (:func:`pioneer.sim.events.classify`): the
+    reward prices an ending, it does not decide it."""
     rc = config
-    p = _parts(world, prev, new, rc, event)
+    p = _parts(world, prev, new, event, rc)
     terms = {
         "success": np.where(p.event == _SUCCESS, rc.success, 0.0),
         "collision": np.where(p.event == _COLLISION, rc.collision, 0.0),
@@ -151,20 +145,19 @@ def crowdnav_reward_terms(
         "spin": p.spin,
         "reverse": p.reverse,
     }
-    return terms, p.total, p.event
+    return terms, p.total
 
 
 def crowdnav_reward(
     world: World,
     prev: State,
     new: State,
+    event: NDArray[np.int8],
     config: CrowdNavRewardConfig,
-    event: NDArray[np.int8] | None = None,
-) -> tuple[F64, NDArray[np.int8]]:
-    """Total reward ``(B,)`` and event codes ``(B,)`` of the step ``prev → new`` (without the
-    per-term breakdown: the trainer's hot path)."""
-    p = _parts(world, prev, new, config, event)
-    return p.total, p.event
+) -> F64:
+    """Total reward ``(B,)`` of the step ``prev → new`` with the world's event codes (without
+    the per-term breakdown: the trainer's hot path)."""
+    return _parts(world, prev, new, event, config).total
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,5 +171,5 @@ class CrowdNavReward:
     def __call__(
         self, world: World, prev: State, new: State, event: NDArray[np.int8]
     ) -> tuple[F64, dict[str, F64]]:
-        terms, total, _ = crowdnav_reward_terms(world, prev, new, self.config, event)
+        terms, total = crowdnav_reward_terms(world, prev, new, event, self.config)
         return total, terms

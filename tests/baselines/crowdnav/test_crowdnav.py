@@ -41,6 +41,7 @@ from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import PolicySpec, evaluate
 from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
 from pioneer.reward.crowdnav import crowdnav_reward
+from pioneer.sim.events import classify
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
 from pioneer.sim.scenarios import get_scenario, sample_state
@@ -206,7 +207,8 @@ def test_reward_terms():
     # Potential only: nobody near, goal straight ahead; 3 × (decrease of goal distance).
     s0 = make_state((0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (0.0, 10.0)}])
     s1 = step(world, s0, [0.5, 0.0])
-    r, ev = crowdnav_reward(world, s0, s1, rc)
+    ev = classify(s0, s1, world.sim.time_limit)
+    r = crowdnav_reward(world, s0, s1, ev, rc)
     assert ev[0] == 0
     assert r[0] == pytest.approx(3.0 * 0.05, abs=1e-9)
     # Intrusion: a human walking into the robot's place in 0.5 s (k = 2) but not at 0.25 s.
@@ -219,26 +221,29 @@ def test_reward_terms():
     s1.h_pos[:] = (2.15, 0.0)
     s1.h_vel[:] = (-2.4, 0.0)
     s1.gap[:] = 1.25
-    r, _ = crowdnav_reward(world, s1, s1, rc)
+    r = crowdnav_reward(world, s1, s1, classify(s1, s1, world.sim.time_limit), rc)
     # k = 1: 2.15 − 0.6 = 1.55 m (clear); k = 2: 0.95 m (clear, > 0.9); k = 3: 0.35 m (hit).
     # Charged per 0.25 s step in the original: × Δt/T = 0.1/0.25 per 0.1 s step here.
     assert r[0] == pytest.approx(-20.0 / 2**4 * 0.4)
-    r_step, _ = crowdnav_reward(world, s1, s1, RewardConfig(reference_dt=None))
+    none = classify(s1, s1, world.sim.time_limit)
+    r_step = crowdnav_reward(world, s1, s1, none, RewardConfig(reference_dt=None))
     assert r_step[0] == pytest.approx(-20.0 / 2**4)
     # Discomfort replaces the potential; spin on the heading change of the step.
     s1.gap[:] = 0.05
     s1.h_pos[:] = (9.0, 9.0)
     s1.command[:] = (0.0, 0.5)
-    r, _ = crowdnav_reward(world, s1, s1, rc)
+    r = crowdnav_reward(world, s1, s1, classify(s1, s1, world.sim.time_limit), rc)
     assert r[0] == pytest.approx((0.05 - 0.25) * 10 * 0.1 - 4.5 * 0.05**2 / 0.4)
     # Collision and success end the episode with their constants.
     s0 = make_state((0.0, 0.0, 0.0), goal=(0.2, 0.0), humans=[{"pos": (0.0, 10.0)}])
     s1 = step(world, s0, [0.3, 0.0])
-    r, ev = crowdnav_reward(world, s0, s1, rc)
+    ev = classify(s0, s1, world.sim.time_limit)
+    r = crowdnav_reward(world, s0, s1, ev, rc)
     assert ev[0] == 1 and r[0] == pytest.approx(10.0)
     s0 = make_state((0.0, 0.0, 0.0), goal=(5.0, 0.0), humans=[{"pos": (0.95, 0.0)}])
     s1 = step(world, s0, [0.8, 0.0])
-    r, ev = crowdnav_reward(world, s0, s1, rc)
+    ev = classify(s0, s1, world.sim.time_limit)
+    r = crowdnav_reward(world, s0, s1, ev, rc)
     assert ev[0] == 2 and r[0] == pytest.approx(-20.0)
 
 

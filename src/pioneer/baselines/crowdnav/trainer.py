@@ -25,7 +25,7 @@ from pioneer.config import Config, check_nonnegative, check_positive
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
-from pioneer.sim.events import Event
+from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
 from pioneer.sim.world import State, step
 
@@ -226,7 +226,8 @@ class _Trainer:
                     action.numpy(), self.state.command[:, 0], sim.robot, sim.dt, self.net_cfg
                 )
                 new = step(self.world, self.state, cmd)
-                r, event = crowdnav_reward(self.world, self.state, new, self.reward_cfg)
+                event = classify(self.state, new, sim.time_limit)  # the world ends episodes
+                r = crowdnav_reward(self.world, self.state, new, event, self.reward_cfg)
                 rewards[t] = r
                 done = event != Event.NONE
                 dones[t] = done
