@@ -11,6 +11,7 @@ import dataclasses
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
+from pioneer.baselines.crowdnav.imitation import Expert as WarmStartExpert
 from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 from pioneer.baselines.sb3 import train_sb3_ppo
 from pioneer.cli._common import (
@@ -31,6 +32,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
+from pioneer.laser import UnseenRule as LaserUnseenRule
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
 from pioneer.learn.dagger import LabelPrev as DaggerLabelPrev
 from pioneer.learn.models import KINDS, StudentKind
@@ -39,8 +41,8 @@ if TYPE_CHECKING:
     Student: TypeAlias = StudentKind
     ActionMode: TypeAlias = DaggerActionMode
     LabelPrev: TypeAlias = DaggerLabelPrev
-    Expert: TypeAlias = str
-    UnseenRule: TypeAlias = str
+    Expert: TypeAlias = WarmStartExpert
+    UnseenRule: TypeAlias = LaserUnseenRule
 else:
     Student = one_of(KINDS)
     ActionMode = one_of(ACTION_MODES)

@@ -26,7 +26,7 @@ from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import run_episode
 from pioneer.io import atomic_path, inside, output_dir, to_json
-from pioneer.laser import UNSEEN_RULES
+from pioneer.laser import UNSEEN_RULES, UnseenRule
 from pioneer.learn.export import export_onnx
 from pioneer.learn.models import load_student
 from pioneer.seeds import validation_seed
@@ -95,7 +95,7 @@ class ScannerPolicy:
         return np.array([d.v, d.omega])
 
 
-def _variants(fov_deg: float, rules: Sequence[str]) -> list[tuple[str, float, str]]:
+def _variants(fov_deg: float, rules: Sequence[UnseenRule]) -> list[tuple[str, float, UnseenRule]]:
     """``(label, fov [rad], rule)``: the full scanner (reference), then each rule at fov."""
     out = [("360°", 2.0 * math.pi, rules[0])]
     out += [(f"{fov_deg:g}° {rule}", math.radians(fov_deg), rule) for rule in rules]
@@ -107,7 +107,7 @@ def run_blind_sector_study(
     scenarios: Sequence[str] = SCENARIOS,
     episodes: int = 100,
     fov_deg: float = 270.0,
-    rules: Sequence[str] = UNSEEN_RULES,
+    rules: Sequence[UnseenRule] = UNSEEN_RULES,
 ) -> dict[str, Any]:
     """Run ``episodes`` validation episodes per scenario for the full scanner and for a
     ``fov_deg`` scanner under each rule; write ``episodes.jsonl`` and ``summary.json`` into

@@ -15,20 +15,23 @@ bodies for the start seeds a scenario file is checked with is redrawn, and count
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Annotated, Any, cast
 
 import numpy as np
+from annotated_types import MinLen
 
-from pioneer.config import Config
+from pioneer.bounds import NonNegative, NonNegativeInt, UnitInterval
+from pioneer.config import Config, Ordered
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
 from pioneer.io import check_name
-from pioneer.sim.scenarios.layouts import ElevatorLayout, elevator_scenario
+from pioneer.sim.scenarios.layouts import ElevatorLayout, HumanSide, elevator_scenario
 from pioneer.sim.scenarios.registry import check_placement
 from pioneer.sim.world import SimConfig
 
 __all__ = ["LayoutDistribution", "sample_layout", "sample_variants"]
 
-Range = tuple[float, float]
+Range = Annotated[tuple[NonNegative, NonNegative], Ordered()]  # 0 <= low <= high
+Counts = Annotated[tuple[NonNegativeInt, NonNegativeInt], Ordered()]  # 0 <= low <= high, inclusive
 PAPER_LOBBY = 4.0  # [m] the paper world's lobby width and depth, the proportions' reference
 MAX_DRAWS = 50  # draws per accepted layout before giving up
 
@@ -37,38 +40,22 @@ MAX_DRAWS = 50  # draws per accepted layout before giving up
 class LayoutDistribution(Config):
     """Uniform ranges of the randomised elevator world (the paper world is inside every one)."""
 
+    error_type = ScenarioError
+
     lobby_width: Range = (3.5, 5.0)  # [m]
     lobby_depth: Range = (3.5, 5.0)  # [m]
     cabin_width: Range = (2.2, 2.8)  # [m]
     cabin_depth: Range = (2.3, 3.0)  # [m]
     door_width: Range = (1.4, 2.2)  # [m] (capped by the cabin width)
-    n_boarding: tuple[int, int] = (1, 3)  # humans boarding from the lobby, inclusive
-    n_exiting: tuple[int, int] = (0, 2)  # humans leaving the cabin, inclusive
+    n_boarding: Counts = (1, 3)  # humans boarding from the lobby
+    n_exiting: Counts = (0, 2)  # humans leaving the cabin
     human_radius: Range = (0.3, 0.6)  # [m]
     v_pref_scale: Range = (0.8, 1.3)  # × the paper's (0.5, 0.6, 0.7) m/s
     a_robot: Range = (0.0, 2.0)  # [m/s²] the humans' reaction to the robot (0: invisible)
-    reacts_share: float = 0.8  # probability that a group (boarders, exiting) reacts at all
+    reacts_share: UnitInterval = 0.8  # probability that a group (boarders, exiting) reacts at all
     lidar_noise: Range = (0.0, 0.03)  # [m] Gaussian range noise σ
-    sides: tuple[str, ...] = ("right", "left")  # "right" → HR-RL, "left" → HL-RR
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if f.name in ("reacts_share", "sides"):
-                continue
-            lo, hi = value
-            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
-                raise ScenarioError(
-                    expect(f"LayoutDistribution.{f.name}", "0 <= low <= high", value, "fix it")
-                )
-        if not 0.0 <= self.reacts_share <= 1.0:
-            raise ScenarioError(
-                expect("LayoutDistribution.reacts_share", "in [0, 1]", self.reacts_share, "0.8")
-            )
-        if not self.sides or set(self.sides) - {"right", "left"}:
-            raise ScenarioError(
-                expect("LayoutDistribution.sides", "'right' and/or 'left'", self.sides, "fix it")
-            )
+    # the humans' sides to draw from: "right" → HR-RL, "left" → HL-RR
+    sides: Annotated[tuple[HumanSide, ...], MinLen(1)] = ("right", "left")
 
 
 def sample_layout(
@@ -88,7 +75,7 @@ def sample_layout(
     n_boarding = k(dist.n_boarding)
     scale = u(dist.v_pref_scale)
     layout = ElevatorLayout(
-        human_side=str(rng.choice(list(dist.sides))),
+        human_side=cast(HumanSide, str(rng.choice(list(dist.sides)))),
         cabin_width=cabin_w,
         cabin_depth=u(dist.cabin_depth),
         door_width=min(u(dist.door_width), cabin_w),
