@@ -473,3 +473,11 @@ def test_the_converted_configs_refuse_an_out_of_range_value_naming_the_field(pat
     msg = str(exc.value)
     assert_house_message(msg, f"{cls.__name__}.{field.split('[')[0]}", field)
     assert msg.count("expected") == 1
+
+
+def test_a_nested_config_field_takes_only_its_config():
+    with pytest.raises(ConfigError) as exc:
+        SimConfig(robot="fast")  # type: ignore[arg-type]
+    assert str(exc.value) == expect(
+        "SimConfig.robot", "a RobotConfig", "fast", "pass a RobotConfig"
+    )

@@ -224,12 +224,30 @@ class _Choices:
             )
 
 
-_Check = _Bounds | _Choices | _Items  # the checks of one field
+@dataclasses.dataclass(frozen=True)
+class _Nested:
+    """A field holding a config: an instance of its class (``None`` too when optional)."""
+
+    cls: type
+    optional: bool = False
+
+    def check(self, owner: str, name: str, value: object, label: str | None = None) -> None:
+        if value is None and self.optional:
+            return
+        if not isinstance(value, self.cls):
+            kind = self.cls.__name__
+            raise ConfigError(
+                expect(label or f"{owner}.{name}", f"a {kind}", value, f"pass a {kind}")
+            )
+
+
+_Check = _Bounds | _Choices | _Items | _Nested  # the checks of one field
 
 
 def _field_bounds(owner: str, name: str, hint: Any) -> _Check | None:
-    """The bounds (for a ``Literal``, the choices; for a tuple, its items' checks) of one field
-    from its resolved type hint, or ``None`` if it declares none."""
+    """The bounds (for a ``Literal``, the choices; for a tuple, its items' checks; for a
+    config, its class) of one field from its resolved type hint, or ``None`` if it declares
+    none."""
     hint, optional = _without_none(hint)
     metadata: tuple[Any, ...] = ()
     if typing.get_origin(hint) is Annotated:
@@ -241,6 +259,8 @@ def _field_bounds(owner: str, name: str, hint: Any) -> _Check | None:
         return _Choices(typing.get_args(hint), optional)
     if typing.get_origin(hint) is tuple:
         return _tuple_checks(owner, name, hint, metadata, optional)
+    if isinstance(hint, type) and issubclass(hint, Config):
+        return _Nested(hint, optional)
     found = list(_constraints(metadata)) if metadata else []
     if not found:
         return None

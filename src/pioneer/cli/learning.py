@@ -35,7 +35,7 @@ from pioneer.laser import UNSEEN_RULES
 from pioneer.laser import UnseenRule as LaserUnseenRule
 from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
 from pioneer.learn.dagger import LabelPrev as DaggerLabelPrev
-from pioneer.learn.models import KINDS, StudentKind
+from pioneer.learn.models import KINDS, StudentConfig, StudentKind
 
 if TYPE_CHECKING:
     Student: TypeAlias = StudentKind
@@ -61,11 +61,11 @@ class Distill:
     """output folder (resumes if it exists)"""
     scenario: str = default(DaggerConfig, "scenario")
     """hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)"""
-    student: Student = default(DaggerConfig, "student")
+    student: Student = default(StudentConfig, "kind")
     """the student network"""
-    action_mode: ActionMode = default(DaggerConfig, "action_mode")
+    action_mode: ActionMode = default(StudentConfig, "action_mode")
     """MDN's executed action"""
-    nll_beta: float = default(DaggerConfig, "nll_beta")
+    nll_beta: float = default(StudentConfig, "nll_beta")
     """MDN's β-NLL exponent in [0, 1]"""
     label_prev: LabelPrev = default(DaggerConfig, "label_prev")
     """u_{t-1} in the teacher's smoothed label on student-driven steps"""
@@ -91,9 +91,9 @@ class Distill:
         self._check_student_flags()
         cfg = DaggerConfig(
             scenario=self.scenario,
-            student=self.student,
-            action_mode=self.action_mode,
-            nll_beta=self.nll_beta,
+            student=StudentConfig(
+                kind=self.student, action_mode=self.action_mode, nll_beta=self.nll_beta
+            ),
             label_prev=self.label_prev,
             teacher_episodes=self.teacher_episodes,
             rounds=self.rounds,
@@ -116,7 +116,7 @@ class Distill:
         if self.student == "mdn":
             return
         for flag, name in (("--action-mode", "action_mode"), ("--nll-beta", "nll_beta")):
-            if getattr(self, name) != default(DaggerConfig, name):
+            if getattr(self, name) != default(StudentConfig, name):
                 raise ConfigError(
                     expect(flag, "--student mdn (an MDN setting)", "--student mlp", f"drop {flag}")
                 )

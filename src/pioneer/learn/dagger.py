@@ -45,17 +45,15 @@ import typing
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal, Self
 
 import numpy as np
 import torch
-from annotated_types import Ge, Interval
 from numpy.typing import NDArray
 
-from pioneer.bounds import Positive
+from pioneer.bounds import Count, NonNegativeInt, Positive
 from pioneer.config import Config
 from pioneer.data import base_scenario
-from pioneer.deploy.mixture import ActionMode
 from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import kept
 from pioneer.io import (
@@ -72,9 +70,10 @@ from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import worker_init as _worker_init
 from pioneer.learn.models import (
     MDN,
+    TRAIN_BATCH,
+    TRAIN_LR,
     Student,
     StudentConfig,
-    StudentKind,
     build_student,
     load_student,
     save_student,
@@ -100,24 +99,29 @@ LABEL_PREV: tuple[str, ...] = typing.get_args(LabelPrev)
 class DaggerConfig(Config):
     """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
+    # hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)
     scenario: str = "hr-rl"
-    student: StudentKind = "mdn"
-    action_mode: ActionMode = "mode"  # MDN's deterministic action in rollouts and checkpoint
-    # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
-    nll_beta: Annotated[float, Interval(ge=0.0, le=1.0)] = 0.0
+    student: StudentConfig = StudentConfig()  # the student network
     # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
     # command the robot actually ran) or "teacher" (the teacher's own previous label along the
     # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
     # labels). Equal on teacher-driven steps.
     label_prev: LabelPrev = "applied"
-    teacher_episodes: Annotated[int, Ge(1)] = 50  # round 0, driven by the teacher
-    rounds: Annotated[int, Ge(0)] = 10  # student-driven rounds after round 0
-    episodes_per_round: Annotated[int, Ge(1)] = 50
-    epochs_initial: Annotated[int, Ge(1)] = 40  # training epochs after round 0 (fresh network)
-    epochs_per_round: Annotated[int, Ge(0)] = 10  # epochs over the aggregate after each later round
-    batch: Annotated[int, Ge(1)] = 256
-    lr: Positive = 1e-3
-    seed: Annotated[int, Ge(0)] = 0
+    teacher_episodes: Count = 50  # round 0, driven by the teacher
+    rounds: NonNegativeInt = 10  # student-driven rounds after round 0
+    episodes_per_round: Count = 50  # episodes of every later round
+    epochs_initial: Count = 40  # training epochs after round 0 (fresh network)
+    epochs_per_round: NonNegativeInt = 10  # epochs over the aggregate after each later round
+    batch: Count = TRAIN_BATCH  # frames per Adam step
+    lr: Positive = TRAIN_LR  # Adam learning rate
+    seed: NonNegativeInt = 0  # seeds the networks and the DAgger episodes
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        """Build from a plain dict, also in the layout of runs and checkpoints written before
+        the student's settings were nested (``student`` its kind, ``action_mode`` and
+        ``nll_beta`` beside it)."""
+        return super().from_dict(_nest_student(data))
 
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
@@ -174,12 +178,37 @@ def load_round(out: Path, rnd: int, n: int) -> list[dict[str, Any]]:
     return [load_npz(_episode_path(out, rnd, i), "DAgger episode", fix) for i in range(n)]
 
 
+def _nest_student(data: Any) -> Any:
+    """``data`` (a DaggerConfig as a dict) in the current layout: the flat ``student`` (its
+    kind), ``action_mode`` and ``nll_beta`` of older runs moved into ``student``."""
+    if not isinstance(data, dict) or isinstance(data.get("student"), dict):
+        return data
+    flat = {"student": "kind", "action_mode": "action_mode", "nll_beta": "nll_beta"}
+    student = {new: data[old] for old, new in flat.items() if old in data}
+    rest = {k: v for k, v in data.items() if k not in flat}
+    return {**rest, "student": student} if student else rest
+
+
+def _flat_settings(cfg: DaggerConfig) -> dict[str, Any]:
+    """The settings as ``{name: value}``, a nested config's as ``student.kind`` etc."""
+    out: dict[str, Any] = {}
+    for key, value in cfg.to_dict().items():
+        if isinstance(value, dict):
+            out |= {f"{key}.{k}": v for k, v in value.items()}
+        else:
+            out[key] = value
+    return out
+
+
 def _check_config(out: Path, cfg: DaggerConfig) -> None:
     """Refuse settings that differ from those of the run in ``out`` (reads only)."""
     p = out / CONFIG_FILE
     if p.exists():
-        old = {**DaggerConfig().to_dict(), **json.loads(p.read_text())}  # older runs: defaults
-        mine = cfg.to_dict()
+        try:  # older runs: their layout upgraded, options added since at their defaults
+            stored = DaggerConfig.from_dict(json.loads(p.read_text()))
+        except ConfigError as exc:
+            raise ConfigError(f"{p}: {exc}") from None
+        old, mine = _flat_settings(stored), _flat_settings(cfg)
         fixed = {k: v for k, v in mine.items() if k != "rounds"}
         if {k: v for k, v in old.items() if k != "rounds"} != fixed:
             diff = sorted(k for k in fixed if old.get(k) != fixed[k])
@@ -375,10 +404,7 @@ def _fit_round(
     if ckpt.exists():
         return load_student(ckpt), [float(v) for v in json_info(ckpt).get("loss_history", [])]
     if model is None:
-        model = build_student(
-            StudentConfig(kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta),
-            seed=cfg.seed,
-        )
+        model = build_student(cfg.student, seed=cfg.seed)
     epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
     if epochs <= 0:
         return model, []

@@ -72,6 +72,8 @@ __all__ = [
 
 ACTION_DIM = 2  # (v [m/s], ω [rad/s])
 CHECKPOINT_FORMAT = "pioneer.student/1"
+TRAIN_BATCH = 256  # frames per Adam step (paper §V-B.2)
+TRAIN_LR = 1e-3  # Adam learning rate (paper §V-B.2)
 StudentKind = Literal["mdn", "mlp"]
 KINDS: tuple[str, ...] = typing.get_args(StudentKind)
 
@@ -298,8 +300,8 @@ def train_student(
     obs: NDArray[np.floating] | torch.Tensor,
     actions: NDArray[np.floating] | torch.Tensor,
     epochs: int = 50,
-    batch: int = 256,
-    lr: float = 1e-3,
+    batch: int = TRAIN_BATCH,
+    lr: float = TRAIN_LR,
     seed: int = 0,
     progress: Callable[[int, float], None] | None = None,
     fit_normalizer: bool = True,

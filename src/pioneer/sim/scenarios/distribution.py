@@ -32,8 +32,9 @@ __all__ = ["LayoutDistribution", "sample_layout", "sample_variants"]
 
 Range = Annotated[tuple[NonNegative, NonNegative], Ordered()]  # 0 <= low <= high
 Counts = Annotated[tuple[NonNegativeInt, NonNegativeInt], Ordered()]  # 0 <= low <= high, inclusive
-PAPER_LOBBY = 4.0  # [m] the paper world's lobby width and depth, the proportions' reference
+PAPER = ElevatorLayout()  # the paper world: the reference of the proportions
 MAX_DRAWS = 50  # draws per accepted layout before giving up
+QUEUE_FRONT_Y = -2.7  # [m] the front of the boarders' start rows when three or more queue
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,9 +72,13 @@ def sample_layout(
 
     w, d = u(dist.lobby_width), u(dist.lobby_depth)
     cabin_w = min(u(dist.cabin_width), w)
-    sw, sd = w / PAPER_LOBBY, d / PAPER_LOBBY  # the paper world's proportions
+    sw, sd = w / PAPER.lobby_width, d / PAPER.lobby_depth  # the paper world's proportions
     n_boarding = k(dist.n_boarding)
     scale = u(dist.v_pref_scale)
+    boarder_y = _scaled(PAPER.boarder_y, sd)
+    if n_boarding >= 3:  # they queue in depth: give them the whole back of the lobby
+        boarder_y = (boarder_y[0], round(QUEUE_FRONT_Y * sd, 3))
+    exit_turn = _scaled(PAPER.exit_waypoints[0] if PAPER.exit_waypoints else None, sw, sd)
     layout = ElevatorLayout(
         human_side=cast(HumanSide, str(rng.choice(list(dist.sides)))),
         cabin_width=cabin_w,
@@ -84,12 +89,11 @@ def sample_layout(
         n_boarding=n_boarding,
         n_exiting=k(dist.n_exiting),
         human_radius=u(dist.human_radius),
-        v_pref_choices=tuple(round(v * scale, 3) for v in (0.5, 0.6, 0.7)),
-        robot_start_y=(round(-2.4 * sd, 3), round(-2.0 * sd, 3)),
-        boarder_x=(round(1.2 * sw, 3), round(1.3 * sw, 3)),
-        # three or more boarders queue in depth: give them the whole back of the lobby
-        boarder_y=(round(-3.8 * sd, 3), round((-3.3 if n_boarding < 3 else -2.7) * sd, 3)),
-        exit_waypoints=((round(1.2 * sw, 3), round(-1.6 * sd, 3)),),
+        v_pref_choices=tuple(round(v * scale, 3) for v in PAPER.v_pref_choices),
+        robot_start_y=_scaled(PAPER.robot_start_y, sd),
+        boarder_x=_scaled(PAPER.boarder_x, sw),
+        boarder_y=boarder_y,
+        exit_waypoints=(exit_turn,),
         boarders_react_to_robot=bool(rng.random() < dist.reacts_share),
         exiting_react_to_robot=bool(rng.random() < dist.reacts_share),
     )
@@ -100,6 +104,16 @@ def sample_layout(
         lidar=dataclasses.replace(base.lidar, noise_std=u(dist.lidar_noise)),
     )
     return layout, sim
+
+
+def _scaled(
+    pair: tuple[float, float] | None, s0: float, s1: float | None = None
+) -> tuple[float, float]:
+    """A pair of the paper world (a range or a point) scaled by ``s0`` (the second item by
+    ``s1``, default ``s0``), rounded to the millimetre."""
+    if pair is None:
+        raise ValueError("the paper world sets every range it scales")  # pragma: no cover
+    return round(pair[0] * s0, 3), round(pair[1] * (s0 if s1 is None else s1), 3)
 
 
 def _changed(cfg: Config, default: Config) -> dict[str, Any]:
