@@ -33,7 +33,7 @@ import math
 import types
 import typing
 import weakref
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Self
 
@@ -47,6 +47,7 @@ __all__ = [
     "check_parameters",
     "check_positive",
     "check_range",
+    "check_values",
     "check_within",
 ]
 
@@ -329,9 +330,18 @@ def _bounds_of(cls: type) -> tuple[tuple[str, _Check], ...]:
 def check_option_bounds(options: object) -> None:
     """The ``Annotated`` bounds of the fields of any dataclass instance (a command's options),
     each error naming the option as ``--name``."""
-    for name, bounds in _bounds_of(type(options)):
-        flag = "--" + name.replace("_", "-")
-        bounds.check(type(options).__name__, name, getattr(options, name), label=flag)
+    fields = dataclasses.fields(options)  # type: ignore[arg-type]
+    values = {f.name: getattr(options, f.name) for f in fields}
+    check_values(type(options), values, lambda name: "--" + name.replace("_", "-"))
+
+
+def check_values(cls: type, values: Mapping[str, Any], label: Callable[[str], str]) -> None:
+    """The declared checks of the fields of dataclass ``cls`` (bounds, choices, items) on
+    ``values`` (field name → value, e.g. parsed options before ``cls`` is built from them),
+    each error naming the field as ``label(name)`` (e.g. its command-line flag)."""
+    for name, bounds in _bounds_of(cls):
+        if name in values:
+            bounds.check(cls.__name__, name, values[name], label=label(name))
 
 
 def _check_bounds(cfg: Config) -> None:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
 import tyro
 from annotated_types import Ge
 
+from pioneer.cli._parse import config_flags, flag_name
 from pioneer.errors import ConfigError, expect
 
 if TYPE_CHECKING:
@@ -33,7 +34,9 @@ __all__ = [
     "Workers",
     "check_outputs",
     "command_line",
+    "config_flags",
     "default",
+    "flag_name",
     "metavar",
     "one_of",
     "optional",

@@ -88,7 +88,9 @@ class StudentConfig(Config):
     dropout: Annotated[float, Interval(ge=0, lt=1)] = 0.1  # after each hidden ReLU (training only)
     n_components: Count = 10  # K, mixture components (MDN only)
     sigma_floor: NonNegative = 1e-3  # [m/s | rad/s] added to every component std (MDN only)
-    action_mode: ActionMode = "mode"  # deterministic action: "mode" or "mean" (module docstring)
+    # the MDN's deterministic action: the mean of its most probable component ("mode") or the
+    # mixture mean ("mean"); see the module docstring
+    action_mode: ActionMode = "mode"
     nll_beta: UnitInterval = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
 
 

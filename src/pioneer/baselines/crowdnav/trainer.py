@@ -60,7 +60,7 @@ class PPOConfig(Config):
     epochs: Count = 5  # passes over each rollout
     minibatches: Count = 2  # per epoch (split over environments)
     value_coef: NonNegative = 0.5  # value-loss weight
-    entropy_coef: NonNegative = 0.01  # entropy bonus (original: 0; see the module docstring)
+    entropy_coef: NonNegative = 0.01  # entropy bonus (original: 0; see baselines.crowdnav.ppo)
     max_grad_norm: Positive = 0.5  # gradient clipping (global L2 norm)
     adam_eps: Positive = 1e-5  # Adam ε
     seed: NonNegativeInt = 0  # seeds the weights, the action noise, the minibatches, the episodes
