@@ -19,6 +19,7 @@ from pioneer.config import (
     check_positive,
     check_range,
     check_within,
+    default,
 )
 from pioneer.errors import (
     CommandError,
@@ -481,3 +482,44 @@ def test_a_nested_config_field_takes_only_its_config():
     assert str(exc.value) == expect(
         "SimConfig.robot", "a RobotConfig", "fast", "pass a RobotConfig"
     )
+
+
+def test_default_reads_fields_parameters_and_class_signatures():
+    from pioneer.baselines.classic import DWAPolicy
+    from pioneer.deploy.mixture import mixture_action
+
+    assert default(SimConfig, "dt") == SimConfig().dt
+    assert default(mixture_action, "mode") == "mode"
+    assert default(DWAPolicy, "n_v") == 7
+    with pytest.raises(TypeError, match="no default"):
+        default(SimConfig, "nope")
+
+
+@pytest.mark.parametrize(
+    ("call", "hint"),
+    [
+        ("mixture", "fix: use 'mode'"),
+        ("lidar_nearest", "fix: use b = 2"),
+        ("lidar_beams", "fix: use e.g. 72 beams in groups of 3"),
+        ("dwa", "fix: use 7, 15"),
+    ],
+)
+def test_error_hints_name_the_declared_defaults(call, hint):
+    """A hint that suggests the default reads it where it is declared (the values here are the
+    declared defaults, checked against them)."""
+    import numpy as np
+
+    from pioneer.baselines.classic import DWAPolicy
+    from pioneer.deploy.mixture import mixture_action
+
+    calls = {
+        "mixture": lambda: mixture_action(np.zeros((1, 2)), np.zeros((1, 2, 2)), "median"),
+        "lidar_nearest": lambda: LidarConfig(n_nearest=0),
+        "lidar_beams": lambda: LidarConfig(n_beams=70),
+        "dwa": lambda: DWAPolicy(n_v=1),
+    }
+    with pytest.raises(ConfigError) as exc:
+        calls[call]()
+    assert str(exc.value).endswith(hint)
+    lidar = LidarConfig()
+    assert (lidar.n_beams, lidar.group_size, lidar.n_nearest) == (72, 3, 2)

@@ -49,6 +49,7 @@ __all__ = [
     "check_range",
     "check_values",
     "check_within",
+    "default",
 ]
 
 
@@ -453,6 +454,23 @@ def _plain(obj: Any) -> Any:
 
 
 # ------------------------------------------------------------------ typed function parameters
+def default(owner: Callable[..., object], name: str) -> Any:
+    """The default of field or parameter ``name`` of ``owner`` (a config dataclass, a class or
+    a function): a default is declared once, where the value is used, and read from there by a
+    command-line flag or an error's hint."""
+    if dataclasses.is_dataclass(owner):
+        for f in dataclasses.fields(owner):
+            if f.name == name and f.default is not dataclasses.MISSING:
+                return f.default
+            if f.name == name and f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+    else:
+        param = inspect.signature(owner).parameters.get(name)
+        if param is not None and param.default is not inspect.Parameter.empty:
+            return param.default
+    raise TypeError(f"{getattr(owner, '__qualname__', owner)} declares no default for {name!r}")
+
+
 def _type_name(hint: Any) -> str:
     hint, _ = _without_none(hint)
     if typing.get_origin(hint) is Annotated:

@@ -49,7 +49,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.config import Config, check_nonnegative, check_positive, default
 from pioneer.errors import ConfigError, DataError, expect
 
 __all__ = [
@@ -100,12 +100,18 @@ class LidarConfig(Config):
                     "LidarConfig.n_beams/group_size",
                     "positive integers with group_size dividing n_beams",
                     (self.n_beams, self.group_size),
-                    "use e.g. 72 beams in groups of 3",
+                    f"use e.g. {default(LidarConfig, 'n_beams')} beams in groups of "
+                    f"{default(LidarConfig, 'group_size')}",
                 )
             )
         if not 1 <= self.n_nearest <= self.n_beams:
             raise ConfigError(
-                expect("LidarConfig.n_nearest", "1 <= b <= n_beams", self.n_nearest, "use b = 2")
+                expect(
+                    "LidarConfig.n_nearest",
+                    "1 <= b <= n_beams",
+                    self.n_nearest,
+                    f"use b = {default(LidarConfig, 'n_nearest')}",
+                )
             )
 
     @property

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.config import default
 from pioneer.data import shipped_student
 from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
@@ -54,7 +55,8 @@ def scanner_message(
     g = beams.size
     inc = 2.0 * math.pi / g
     if not 0.0 < fov_rad <= 2.0 * math.pi:
-        raise ConfigError(expect("fov", "in (0°, 360°]", math.degrees(fov_rad), "use e.g. 270"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'fov_deg'):g}"
+        raise ConfigError(expect("fov", "in (0°, 360°]", math.degrees(fov_rad), fix))
     if fov_rad >= 2.0 * math.pi - 1e-9:
         idx = np.arange(g)
         k = 0
@@ -117,9 +119,11 @@ def run_blind_sector_study(
     if bad or not rules:
         raise ConfigError(expect("rules", f"some of {UNSEEN_RULES}", list(rules), "fix them"))
     if not 0.0 < fov_deg <= 360.0:
-        raise ConfigError(expect("--fov", "in (0°, 360°]", fov_deg, "use e.g. 270"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'fov_deg'):g}"
+        raise ConfigError(expect("--fov", "in (0°, 360°]", fov_deg, fix))
     if episodes < 1:
-        raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'episodes')}"
+        raise ConfigError(expect("--episodes", "an integer >= 1", episodes, fix))
     from pioneer.sim.scenarios import get_scenario
 
     students = {sc: shipped_student(get_scenario(sc).name) for sc in scenarios}

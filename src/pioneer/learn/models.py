@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from torch import nn
 
 from pioneer.bounds import Count, NonNegative, UnitInterval
-from pioneer.config import Config
+from pioneer.config import Config, default
 from pioneer.deploy.mixture import ACTION_MODES, ActionMode, mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
@@ -125,7 +125,8 @@ def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") ->
         return mu.gather(1, idx).squeeze(1)
     if mode == "mean":
         return (torch.softmax(logits, dim=-1).unsqueeze(-1) * mu).sum(dim=-2)
-    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))
+    fix = f"use {default(select_action, 'mode')!r}"
+    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))
 
 
 # ---------------------------------------------------------------------------------- networks
@@ -328,7 +329,7 @@ def train_student(
         if not (isinstance(value, int) and value >= 1):
             raise ConfigError(expect(name, "an integer >= 1", value, f"set {name} >= 1"))
     if not (math.isfinite(lr) and lr > 0):
-        raise ConfigError(expect("lr", "a finite number > 0", lr, "use 1e-3"))
+        raise ConfigError(expect("lr", "a finite number > 0", lr, f"use {TRAIN_LR:g}"))
     if fit_normalizer:
         model.set_normalizer(x, y)
     n = x.shape[0]
