@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
 import math
 from typing import Annotated, Literal
@@ -10,8 +11,16 @@ from typing import Annotated, Literal
 import pytest
 from annotated_types import Ge, Gt, Interval, Le, Lt, MinLen, MultipleOf
 
-from pioneer.bounds import NonNegative, Positive
-from pioneer.config import Config, check_nonnegative, check_positive, check_range
+from pioneer.bounds import Finite, NonNegative, Positive, Span
+from pioneer.config import (
+    Config,
+    Ordered,
+    check_nonnegative,
+    check_positive,
+    check_range,
+    check_within,
+    default,
+)
 from pioneer.errors import (
     CommandError,
     ConfigError,
@@ -320,3 +329,197 @@ def test_a_literal_field_takes_only_its_values_on_every_construction():
 def test_the_libraries_choices_are_checked_by_the_base(cfg, field):
     with pytest.raises(ConfigError, match=field):
         cfg(**{field: "no-such-choice"})
+
+
+# ------------------------------------------------------------------------------ tuple fields
+@dataclasses.dataclass(frozen=True)
+class _Tupled(Config):
+    span: Span = (0.0, 1.0)
+    maybe: Span | None = None
+    rates: Annotated[tuple[Positive, ...], MinLen(1)] = (1.0,)
+    signs: tuple[Annotated[float, Lt(0)], Positive] = (-1.0, 1.0)
+    picks: tuple[Literal["a", "b"], ...] = ("a",)
+    levels: Annotated[tuple[Annotated[float, Interval(gt=0, le=1)], ...], Ordered()] = (0.1, 0.5)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field", "expected"),
+    [
+        ({"span": (1.0, 0.0)}, "_Tupled.span", "finite bounds with low <= high"),
+        ({"span": (0.0, math.inf)}, "_Tupled.span", "finite bounds with low <= high"),
+        ({"span": (0.0,)}, "_Tupled.span", "a list of 2 values"),
+        ({"span": 1.0}, "_Tupled.span", "a list of 2 values"),
+        ({"maybe": (2.0, 1.0)}, "_Tupled.maybe", "finite bounds with low <= high"),
+        ({"rates": ()}, "_Tupled.rates", "a list of at least 1 value"),
+        ({"rates": (1.0, 0.0)}, "_Tupled.rates[1]", "a finite number > 0"),
+        ({"signs": (0.5, 1.0)}, "_Tupled.signs[0]", "a finite number < 0"),
+        ({"signs": (-0.5, -1.0)}, "_Tupled.signs[1]", "a finite number > 0"),
+        ({"picks": ("a", "c")}, "_Tupled.picks[1]", "one of 'a', 'b'"),
+        ({"levels": (0.5, 0.1)}, "_Tupled.levels", "finite numbers in non-decreasing order"),
+        ({"levels": (0.0, 0.1)}, "_Tupled.levels[0]", "a finite number > 0 and <= 1"),
+    ],
+)
+def test_tuple_fields_are_checked_item_by_item(kwargs, field, expected):
+    with pytest.raises(ConfigError) as exc:
+        _Tupled(**kwargs)
+    msg = str(exc.value)
+    assert msg.startswith(f"{field}: expected {expected}, received ")
+    assert_house_message(msg, field)
+
+
+def test_tuple_fields_accept_lists_equal_bounds_and_none():
+    cfg = _Tupled(span=(0.5, 0.5), maybe=None, rates=[2.0, 3.0], levels=(0.2, 0.2, 1.0))
+    assert cfg.span == (0.5, 0.5) and cfg.rates == [2.0, 3.0]
+    assert _Tupled.from_dict({"span": [0.0, 2.0]}).span == (0.0, 2.0)
+    with pytest.raises(ConfigError, match=r"_Tupled\.span"):
+        _Tupled.from_dict({"span": [2.0, 0.0]})
+
+
+def test_a_declared_range_says_what_check_range_says():
+    with pytest.raises(ConfigError) as declared:
+        _Tupled(span=(1.0, 0.0))
+    with pytest.raises(ConfigError) as by_hand:
+        check_range("_Tupled", "span", 1.0, 0.0)
+    assert str(declared.value) == str(by_hand.value)
+
+
+def test_unsupported_tuple_constraints_are_refused():
+    @dataclasses.dataclass(frozen=True)
+    class Fixed(Config):
+        pair: Annotated[tuple[float, float], MinLen(1)] = (0.0, 1.0)
+
+    with pytest.raises(TypeError, match=r"Fixed\.pair"):
+        Fixed()
+
+
+def test_finite_and_within_bounds():
+    @dataclasses.dataclass(frozen=True)
+    class Free(Config):
+        x: Finite = 0.0
+
+    assert Free(x=-1e300).x == -1e300
+    with pytest.raises(ConfigError) as exc:
+        Free(x=math.nan)
+    assert str(exc.value) == expect(
+        "Free.x", "a finite number", math.nan, "set x to a finite number"
+    )
+    check_within("X", "share", 1.0, 0.0, 1.0)
+    with pytest.raises(ConfigError) as exc:
+        check_within("X", "share", 1.5, 0.0, 1.0)
+    assert "X.share: expected a finite number >= 0 and <= 1" in str(exc.value)
+
+
+def test_a_config_may_raise_a_subclass_of_config_error():
+    @dataclasses.dataclass(frozen=True)
+    class Place(Config):
+        error_type = ScenarioError
+        width: Positive = 1.0
+
+    with pytest.raises(ScenarioError, match=r"Place\.width"):
+        Place(width=0.0)
+    with pytest.raises(ScenarioError):
+        ElevatorLayout(human_side="up")  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------- the library's converted configs
+def _config(path: str) -> type[Config]:
+    module, name = path.rsplit(".", 1)
+    cls = getattr(importlib.import_module(module), name)
+    assert issubclass(cls, Config)
+    return cls
+
+
+@pytest.mark.parametrize(
+    ("path", "kwargs", "field"),
+    [
+        ("pioneer.sim.world.SimConfig", {"time_limit": -1.0}, "time_limit"),
+        ("pioneer.sim.ElevatorLayout", {"human_side": "up"}, "human_side"),
+        ("pioneer.sim.ElevatorLayout", {"n_exiting": -1}, "n_exiting"),
+        ("pioneer.sim.ElevatorLayout", {"boarding_delay": (1.5, 0.5)}, "boarding_delay"),
+        ("pioneer.sim.ElevatorLayout", {"boarder_release_waypoint": 3}, "boarder_release_waypoint"),
+        ("pioneer.sim.scenarios.layouts.StaticStudyLayout", {"width": 0.0}, "width"),
+        ("pioneer.sim.Region", {"x": (1.0, 0.0), "y": (0.0, 0.0)}, "x"),
+        (
+            "pioneer.sim.scenarios.distribution.LayoutDistribution",
+            {"sides": ("right", "down")},
+            "sides[1]",
+        ),
+        (
+            "pioneer.sim.scenarios.distribution.LayoutDistribution",
+            {"n_boarding": (3, 1)},
+            "n_boarding",
+        ),
+        (
+            "pioneer.sim.scenarios.distribution.LayoutDistribution",
+            {"reacts_share": 2.0},
+            "reacts_share",
+        ),
+        ("pioneer.baselines.crowdnav.trainer.PPOConfig", {"gamma": 1.5}, "gamma"),
+        ("pioneer.baselines.crowdnav.trainer.PPOConfig", {"n_envs": 0}, "n_envs"),
+        ("pioneer.baselines.crowdnav.imitation.WarmStartConfig", {"expert": "me"}, "expert"),
+        ("pioneer.baselines.crowdnav.imitation.WarmStartConfig", {"bc_batch": 0}, "bc_batch"),
+        ("pioneer.baselines.crowdnav.network.CrowdNavConfig", {"dv_range": (0.1, 0.2)}, "dv_range"),
+        ("pioneer.baselines.cvar_bf.config.CvarBfConfig", {"betas": (0.3, 0.1)}, "betas"),
+        ("pioneer.baselines.cvar_bf.config.CvarBfConfig", {"max_iter": 0}, "max_iter"),
+        ("pioneer.learn.models.StudentConfig", {"hidden": (128, 0)}, "hidden[1]"),
+        ("pioneer.learn.models.StudentConfig", {"dropout": 1.0}, "dropout"),
+        ("pioneer.deploy.runtime.RuntimeConfig", {"unseen": "guess"}, "unseen"),
+        ("pioneer.deploy.runtime.RuntimeConfig", {"min_valid_share": 1.5}, "min_valid_share"),
+    ],
+)
+def test_the_converted_configs_refuse_an_out_of_range_value_naming_the_field(path, kwargs, field):
+    cls = _config(path)
+    with pytest.raises(ConfigError) as exc:
+        cls(**kwargs)
+    msg = str(exc.value)
+    assert_house_message(msg, f"{cls.__name__}.{field.split('[')[0]}", field)
+    assert msg.count("expected") == 1
+
+
+def test_a_nested_config_field_takes_only_its_config():
+    with pytest.raises(ConfigError) as exc:
+        SimConfig(robot="fast")  # type: ignore[arg-type]
+    assert str(exc.value) == expect(
+        "SimConfig.robot", "a RobotConfig", "fast", "pass a RobotConfig"
+    )
+
+
+def test_default_reads_fields_parameters_and_class_signatures():
+    from pioneer.baselines.classic import DWAPolicy
+    from pioneer.deploy.mixture import mixture_action
+
+    assert default(SimConfig, "dt") == SimConfig().dt
+    assert default(mixture_action, "mode") == "mode"
+    assert default(DWAPolicy, "n_v") == 7
+    with pytest.raises(TypeError, match="no default"):
+        default(SimConfig, "nope")
+
+
+@pytest.mark.parametrize(
+    ("call", "hint"),
+    [
+        ("mixture", "fix: use 'mode'"),
+        ("lidar_nearest", "fix: use b = 2"),
+        ("lidar_beams", "fix: use e.g. 72 beams in groups of 3"),
+        ("dwa", "fix: use 7, 15"),
+    ],
+)
+def test_error_hints_name_the_declared_defaults(call, hint):
+    """A hint that suggests the default reads it where it is declared (the values here are the
+    declared defaults, checked against them)."""
+    import numpy as np
+
+    from pioneer.baselines.classic import DWAPolicy
+    from pioneer.deploy.mixture import mixture_action
+
+    calls = {
+        "mixture": lambda: mixture_action(np.zeros((1, 2)), np.zeros((1, 2, 2)), "median"),
+        "lidar_nearest": lambda: LidarConfig(n_nearest=0),
+        "lidar_beams": lambda: LidarConfig(n_beams=70),
+        "dwa": lambda: DWAPolicy(n_v=1),
+    }
+    with pytest.raises(ConfigError) as exc:
+        calls[call]()
+    assert str(exc.value).endswith(hint)
+    lidar = LidarConfig()
+    assert (lidar.n_beams, lidar.group_size, lidar.n_nearest) == (72, 3, 2)

@@ -5,11 +5,18 @@ A field may carry `annotated-types <https://github.com/annotated-types/annotated
 bounds, e.g. ``radius: Annotated[float, Gt(0)] = 0.3`` (or the aliases
 :data:`pioneer.bounds.Positive`, :data:`pioneer.bounds.NonNegative`); :class:`Config`
 enforces them once, before any ``__post_init__`` of the subclass runs, with the message of
-:func:`check_positive` / :func:`check_nonnegative`. Supported: ``Gt``, ``Ge``, ``Lt``, ``Le``
-and ``Interval`` on ``int`` and ``float`` fields, also inside ``| None`` (``None`` then
-passes). A bounded ``float`` must be finite; a bounded ``int`` must be an integer (not a
-bool). A ``Literal[...]`` field (a choice) must hold one of its values. Cross-field checks stay
-code in ``__post_init__``.
+:func:`check_positive` / :func:`check_nonnegative` / :func:`check_within` (the helpers
+left for the configs of the light robot install, which declare no bounds). Supported:
+``Gt``, ``Ge``, ``Lt``, ``Le`` and ``Interval`` on ``int`` and ``float`` fields, also inside
+``| None`` (``None`` then passes). A bounded ``float`` must be finite; a bounded ``int`` must
+be an integer (not a bool). A ``Literal[...]`` field (a choice) must hold one of its values;
+it needs no annotated-types.
+
+A tuple field is checked item by item against its item types (``tuple[Positive, ...]``: every
+item > 0; ``tuple[Annotated[float, Lt(0)], Positive]``: the first < 0, the second > 0;
+``tuple[Literal["a", "b"], ...]``: choices), may bound its length (``MinLen``, ``MaxLen``) and
+may carry :class:`Ordered`: finite items in non-decreasing order, e.g. a ``(low, high)`` range
+(:data:`pioneer.bounds.Span`). Cross-field checks stay code in ``__post_init__``.
 
 annotated-types is imported only when a field carries ``Annotated`` metadata, so a config
 without declared bounds (the LiDAR's, the robot runtime's) needs no annotated-types: the
@@ -21,23 +28,28 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import itertools
 import math
 import types
 import typing
 import weakref
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
-from typing import Annotated, Any, Self
+from typing import Annotated, Any, ClassVar, Self
 
 from pioneer.errors import ConfigError, expect
 
 __all__ = [
     "Config",
+    "Ordered",
     "check_nonnegative",
     "check_option_bounds",
     "check_parameters",
     "check_positive",
     "check_range",
+    "check_values",
+    "check_within",
+    "default",
 ]
 
 
@@ -53,11 +65,12 @@ class _Bounds:
     optional: bool = False  # ``None`` passes
 
     def describe(self) -> str:
-        """``> 0``, ``>= 1``, ``>= 0 and <= 1``: the accepted range."""
+        """``> 0``, ``>= 1``, ``>= 0 and <= 1``: the accepted range (infinite bounds, which
+        only ask for a finite number, left out)."""
         parts = []
-        if self.lower is not None:
+        if self.lower is not None and math.isfinite(self.lower):
             parts.append(f"{'>' if self.lower_strict else '>='} {self.lower:g}")
-        if self.upper is not None:
+        if self.upper is not None and math.isfinite(self.upper):
             parts.append(f"{'<' if self.upper_strict else '<='} {self.upper:g}")
         return " and ".join(parts)
 
@@ -67,10 +80,10 @@ class _Bounds:
         if value is None and self.optional:
             return
         if not self._accepts(value):
-            rng = self.describe()
             kind = "an integer" if self.integer else "a finite number"
-            field = label or f"{owner}.{name}"
-            raise ConfigError(expect(field, f"{kind} {rng}", value, f"set {label or name} {rng}"))
+            wanted = f"{kind} {self.describe()}".strip()
+            fix = f"set {label or name} {self.describe() or 'to ' + kind}"
+            raise ConfigError(expect(label or f"{owner}.{name}", wanted, value, fix))
 
     def _accepts(self, value: object) -> bool:
         if self.integer:
@@ -96,12 +109,70 @@ def check_nonnegative(owner: str, name: str, value: float) -> None:
     _Bounds(lower=0).check(owner, name, value)
 
 
+def check_within(owner: str, name: str, value: float, low: float, high: float) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is a finite number in ``[low, high]``."""
+    _Bounds(lower=low, upper=high).check(owner, name, value)
+
+
 def check_range(owner: str, name: str, lo: float, hi: float) -> None:
     """Raise :class:`ConfigError` unless ``lo <= hi`` and both are finite."""
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
-        raise ConfigError(
-            expect(f"{owner}.{name}", "finite bounds with low <= high", (lo, hi), "swap or fix")
-        )
+    _Items(items=(None, None), ordered=True).check(owner, name, (lo, hi))
+
+
+@dataclasses.dataclass(frozen=True)
+class Ordered:
+    """``Annotated`` metadata of a tuple of numbers: its items are finite and in non-decreasing
+    order (a ``(low, high)`` range: low <= high). Checked by :class:`Config`."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _Items:
+    """The checks of a tuple field: its length, each item's bounds or choices, the order."""
+
+    items: tuple[_Check | None, ...] | None = None  # per position; None: ``tuple[X, ...]``
+    each: _Check | None = None  # every item of a ``tuple[X, ...]``
+    min_len: int = 0
+    max_len: int | None = None
+    ordered: bool = False  # see Ordered
+    optional: bool = False  # ``None`` passes
+
+    def check(self, owner: str, name: str, value: object, label: str | None = None) -> None:
+        """Raise :class:`ConfigError` unless ``value`` is a tuple (or list) of the right length
+        whose items pass their checks (each named ``name[i]``), in order when ordered."""
+        if value is None and self.optional:
+            return
+        field = label or f"{owner}.{name}"
+        n_min, n_max = self.min_len, self.max_len
+        if self.items is not None:
+            n_min = n_max = len(self.items)
+        if not isinstance(value, tuple | list) or not (
+            n_min <= len(value) and (n_max is None or len(value) <= n_max)
+        ):
+            if n_min == 0 and n_max is None:
+                raise ConfigError(expect(field, "a list", value, "give a list of values"))
+            if n_min == n_max:
+                size, count = f"{n_min}", n_min
+            elif n_max is None:
+                size, count = f"at least {n_min}", n_min
+            else:
+                size, count = f"{n_min} to {n_max}", n_max
+            many = f"{size} value{'' if count == 1 else 's'}"
+            raise ConfigError(expect(field, f"a list of {many}", value, f"give {many}"))
+        for i, item in enumerate(value):
+            check = self.each if self.items is None else self.items[i]
+            if check is not None:
+                check.check(owner, f"{name}[{i}]", item, None if label is None else f"{label}[{i}]")
+        if self.ordered:
+            finite = all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value
+            )
+            if not (finite and all(a <= b for a, b in itertools.pairwise(value))):
+                if self.items is not None and len(self.items) == 2:  # a (low, high) range
+                    wanted, fix = "finite bounds with low <= high", "swap or fix"
+                else:
+                    wanted, fix = "finite numbers in non-decreasing order", "sort them"
+                raise ConfigError(expect(field, wanted, tuple(value), fix))
 
 
 def _constraints(metadata: tuple[Any, ...]) -> Iterator[Any]:
@@ -155,19 +226,47 @@ class _Choices:
             )
 
 
-def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | _Choices | None:
-    """The bounds (or, for a ``Literal``, the choices) of one field from its resolved type
-    hint, or ``None`` if it declares none."""
+@dataclasses.dataclass(frozen=True)
+class _Nested:
+    """A field holding a config: an instance of its class (``None`` too when optional)."""
+
+    cls: type
+    optional: bool = False
+
+    def check(self, owner: str, name: str, value: object, label: str | None = None) -> None:
+        if value is None and self.optional:
+            return
+        if not isinstance(value, self.cls):
+            kind = self.cls.__name__
+            raise ConfigError(
+                expect(label or f"{owner}.{name}", f"a {kind}", value, f"pass a {kind}")
+            )
+
+
+_Check = _Bounds | _Choices | _Items | _Nested  # the checks of one field
+
+
+def _field_bounds(owner: str, name: str, hint: Any) -> _Check | None:
+    """The bounds (for a ``Literal``, the choices; for a tuple, its items' checks; for a
+    config, its class) of one field from its resolved type hint, or ``None`` if it declares
+    none."""
     hint, optional = _without_none(hint)
+    metadata: tuple[Any, ...] = ()
+    if typing.get_origin(hint) is Annotated:
+        hint, *extra = typing.get_args(hint)
+        metadata = tuple(extra)
+        hint, none_inside = _without_none(hint)
+        optional = optional or none_inside
     if typing.get_origin(hint) is typing.Literal:
         return _Choices(typing.get_args(hint), optional)
-    if typing.get_origin(hint) is not Annotated:
-        return None
-    base, *metadata = typing.get_args(hint)
-    found = list(_constraints(tuple(metadata)))
+    if typing.get_origin(hint) is tuple:
+        return _tuple_checks(owner, name, hint, metadata, optional)
+    if isinstance(hint, type) and issubclass(hint, Config):
+        return _Nested(hint, optional)
+    found = list(_constraints(metadata)) if metadata else []
     if not found:
         return None
-    base, none_inside = _without_none(base)
+    base = hint
     if base not in (int, float):
         raise TypeError(f"{owner}.{name}: bounds need an int or float field, not {base!r}")
     kw: dict[str, Any] = {}
@@ -180,13 +279,42 @@ def _field_bounds(owner: str, name: str, hint: Any) -> _Bounds | _Choices | None
         if key in kw:
             raise TypeError(f"{owner}.{name}: more than one {key} bound")
         kw[key], kw[f"{key}_strict"] = float(getattr(c, attr)), strict
-    return _Bounds(integer=base is int, optional=optional or none_inside, **kw)
+    return _Bounds(integer=base is int, optional=optional, **kw)
 
 
-_BOUNDS: dict[type, tuple[tuple[str, _Bounds | _Choices], ...]] = {}
+def _tuple_checks(
+    owner: str, name: str, hint: Any, metadata: tuple[Any, ...], optional: bool
+) -> _Items | None:
+    """The checks of a tuple field (see :class:`_Items`), or ``None`` if it declares none."""
+    args = typing.get_args(hint)
+    variadic = len(args) == 2 and args[1] is Ellipsis
+    checks = tuple(_field_bounds(owner, name, a) for a in (args[:1] if variadic else args))
+    kw: dict[str, Any] = {}
+    if metadata:
+        import annotated_types as at
+
+        for c in _constraints(metadata):
+            if isinstance(c, at.MinLen) and variadic:
+                kw["min_len"] = int(c.min_length)
+            elif isinstance(c, at.MaxLen) and variadic:
+                kw["max_len"] = int(c.max_length)
+            else:
+                raise TypeError(
+                    f"{owner}.{name}: unsupported constraint {c!r} on a tuple (bound its items"
+                    " through their type; MinLen, MaxLen on a tuple[X, ...])"
+                )
+    ordered = any(isinstance(m, Ordered) for m in metadata)
+    if not (ordered or kw or any(c is not None for c in checks)):
+        return None
+    items = None if variadic else checks
+    each = checks[0] if variadic else None
+    return _Items(items=items, each=each, ordered=ordered, optional=optional, **kw)
 
 
-def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds | _Choices], ...]:
+_BOUNDS: dict[type, tuple[tuple[str, _Check], ...]] = {}
+
+
+def _bounds_of(cls: type) -> tuple[tuple[str, _Check], ...]:
     """``(field name, bounds or choices)`` of every bounded or ``Literal`` field of a config
     class (resolved once)."""
     if cls in _BOUNDS:
@@ -203,15 +331,29 @@ def _bounds_of(cls: type) -> tuple[tuple[str, _Bounds | _Choices], ...]:
 def check_option_bounds(options: object) -> None:
     """The ``Annotated`` bounds of the fields of any dataclass instance (a command's options),
     each error naming the option as ``--name``."""
-    for name, bounds in _bounds_of(type(options)):
-        flag = "--" + name.replace("_", "-")
-        bounds.check(type(options).__name__, name, getattr(options, name), label=flag)
+    fields = dataclasses.fields(options)  # type: ignore[arg-type]
+    values = {f.name: getattr(options, f.name) for f in fields}
+    check_values(type(options), values, lambda name: "--" + name.replace("_", "-"))
+
+
+def check_values(cls: type, values: Mapping[str, Any], label: Callable[[str], str]) -> None:
+    """The declared checks of the fields of dataclass ``cls`` (bounds, choices, items) on
+    ``values`` (field name → value, e.g. parsed options before ``cls`` is built from them),
+    each error naming the field as ``label(name)`` (e.g. its command-line flag)."""
+    for name, bounds in _bounds_of(cls):
+        if name in values:
+            bounds.check(cls.__name__, name, values[name], label=label(name))
 
 
 def _check_bounds(cfg: Config) -> None:
     owner = type(cfg).__name__
-    for name, bounds in _bounds_of(type(cfg)):
-        bounds.check(owner, name, getattr(cfg, name))
+    try:
+        for name, bounds in _bounds_of(type(cfg)):
+            bounds.check(owner, name, getattr(cfg, name))
+    except ConfigError as exc:
+        if type(exc) is cfg.error_type:
+            raise
+        raise cfg.error_type(str(exc)) from None
 
 
 _BOUNDS_FIRST: weakref.WeakSet[Callable[[Any], None]] = weakref.WeakSet()
@@ -235,6 +377,9 @@ class Config:
     and the bounds declared on the fields (``Annotated[float, Gt(0)]``, see the module) are
     checked on every construction, ``replace`` and ``from_dict`` included, before the
     subclass's own ``__post_init__`` (which need not call ``super().__post_init__()``)."""
+
+    # What a declared check raises: ConfigError, or a subclass (a scenario's: ScenarioError).
+    error_type: ClassVar[type[ConfigError]] = ConfigError
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -309,6 +454,23 @@ def _plain(obj: Any) -> Any:
 
 
 # ------------------------------------------------------------------ typed function parameters
+def default(owner: Callable[..., object], name: str) -> Any:
+    """The default of field or parameter ``name`` of ``owner`` (a config dataclass, a class or
+    a function): a default is declared once, where the value is used, and read from there by a
+    command-line flag or an error's hint."""
+    if dataclasses.is_dataclass(owner):
+        for f in dataclasses.fields(owner):
+            if f.name == name and f.default is not dataclasses.MISSING:
+                return f.default
+            if f.name == name and f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+    else:
+        param = inspect.signature(owner).parameters.get(name)
+        if param is not None and param.default is not inspect.Parameter.empty:
+            return param.default
+    raise TypeError(f"{getattr(owner, '__qualname__', owner)} declares no default for {name!r}")
+
+
 def _type_name(hint: Any) -> str:
     hint, _ = _without_none(hint)
     if typing.get_origin(hint) is Annotated:

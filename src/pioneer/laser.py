@@ -49,7 +49,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.config import Config, check_nonnegative, check_positive, default
 from pioneer.errors import ConfigError, DataError, expect
 
 __all__ = [
@@ -59,6 +59,7 @@ __all__ = [
     "UNSEEN_RULES",
     "LidarConfig",
     "ScanReading",
+    "UnseenRule",
     "beam_angles",
     "mirror_observation",
     "observation_from_beams",
@@ -72,8 +73,9 @@ __all__ = [
 OBS_DIM = 29
 SectorLayout = Literal["centred", "heading_first"]
 SECTOR_LAYOUTS: tuple[str, ...] = typing.get_args(SectorLayout)
-UNSEEN_RULES = ("obstacle", "nearest", "max_range")  # fills of unseen directions (module doc)
-DEFAULT_UNSEEN = "obstacle"
+UnseenRule = Literal["obstacle", "nearest", "max_range"]  # fills of unseen directions (module doc)
+UNSEEN_RULES: tuple[UnseenRule, ...] = typing.get_args(UnseenRule)
+DEFAULT_UNSEEN: UnseenRule = "obstacle"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +89,9 @@ class LidarConfig(Config):
     noise_std: float = 0.0  # [m] Gaussian range noise (0 = off)
     sector_layout: SectorLayout = "centred"  # sector 0 centred on the heading (module doc)
 
-    def __post_init__(self) -> None:  # sector_layout: a Literal, checked by Config
+    def __post_init__(self) -> None:
+        # sector_layout is a Literal, checked by Config; the bounds are written by hand, not
+        # declared, as the light robot install (this module, no annotated-types) must load it.
         check_positive("LidarConfig", "max_range", self.max_range)
         check_nonnegative("LidarConfig", "noise_std", self.noise_std)
         if self.n_beams <= 0 or self.group_size <= 0 or self.n_beams % self.group_size:
@@ -96,12 +100,18 @@ class LidarConfig(Config):
                     "LidarConfig.n_beams/group_size",
                     "positive integers with group_size dividing n_beams",
                     (self.n_beams, self.group_size),
-                    "use e.g. 72 beams in groups of 3",
+                    f"use e.g. {default(LidarConfig, 'n_beams')} beams in groups of "
+                    f"{default(LidarConfig, 'group_size')}",
                 )
             )
         if not 1 <= self.n_nearest <= self.n_beams:
             raise ConfigError(
-                expect("LidarConfig.n_nearest", "1 <= b <= n_beams", self.n_nearest, "use b = 2")
+                expect(
+                    "LidarConfig.n_nearest",
+                    "1 <= b <= n_beams",
+                    self.n_nearest,
+                    f"use b = {default(LidarConfig, 'n_nearest')}",
+                )
             )
 
     @property

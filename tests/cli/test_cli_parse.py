@@ -12,6 +12,8 @@ from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.ppo import PPOConfig
 from pioneer.cli import main
 from pioneer.learn.dagger import DaggerConfig
+from pioneer.learn.models import StudentConfig
+from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import DensityConfig
 from pioneer_testutils import assert_house_message, run_cli
 
@@ -101,12 +103,11 @@ def test_train_defaults_are_the_ppo_and_warm_start_configs(monkeypatch, tmp_path
     assert seen == {"ppo": PPOConfig(), "warm": WarmStartConfig(), "resume": None, "threads": 1}
 
 
-def test_reward_fit_defaults_are_the_density_config():
+def test_reward_fit_defaults_are_the_recipe_and_density_config():
     from pioneer.cli.reward import RewardFit
 
     fit = RewardFit(demos="d.npz", out="m.npz")
-    names = ("length_scale", "lam", "beta", "max_inducing", "inducing")
-    assert DensityConfig(**{n: getattr(fit, n) for n in names}) == DensityConfig()
+    assert fit.recipe == RewardRecipe() and fit.recipe.density == DensityConfig()
 
 
 @pytest.mark.parametrize(
@@ -177,3 +178,98 @@ def test_python_dash_m_help():
     )
     assert proc.returncode == 0 and proc.stdout.startswith("usage: pioneer ")
     assert "reproduce" in proc.stdout and proc.stderr == ""
+
+
+# ------------------------------------------------------------ the options are the configs
+def _parsed(argv: list[str]):
+    """The options object ``pioneer ARGV`` would run (parsed, not run)."""
+    from pioneer.cli._app import _parse
+
+    command, _ = _parse(argv)
+    return command
+
+
+def test_distill_flags_fill_the_dagger_and_student_configs():
+    cmd = _parsed(["distill", "--out", "d", "--rounds", "3", "--student", "mlp", "--hidden", "64"])
+    assert cmd.dagger == DaggerConfig(rounds=3, student=StudentConfig(kind="mlp", hidden=(64,)))
+    cmd = _parsed(["distill", "--out", "d", "--action-mode", "mean", "--nll-beta", "0.5"])
+    assert cmd.dagger.student == StudentConfig(action_mode="mean", nll_beta=0.5)
+
+
+def test_crowdnav_flags_keep_their_names_and_fill_the_configs():
+    argv = ["train", "crowdnav++", "--out", "t", "--steps", "100", "--envs", "4"]
+    cmd = _parsed([*argv, "--bc-expert", "dwa", "--bc-episodes", "2", "--gamma", "0.9"])
+    assert cmd.ppo == PPOConfig(total_steps=100, n_envs=4, gamma=0.9)
+    assert cmd.warm == WarmStartConfig(expert="dwa", bc_episodes=2)
+
+
+def test_reward_fit_and_demos_generate_flags_fill_their_configs():
+    from pioneer.demos.generate import Selection
+
+    cmd = _parsed(
+        ["reward", "fit", "--demos", "d", "--out", "m", "--lam", "0.5", "--gamma", "graded"]
+    )
+    assert cmd.recipe == RewardRecipe(gamma="graded", density=DensityConfig(lam=0.5))
+    cmd = _parsed(["demos", "generate", "--scenario", "static", "--out", "o", "--max-time", "9"])
+    assert cmd.selection == Selection(max_time_s=9.0)
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag", "bound"),
+    [
+        (["distill", "--out", "d", "--rounds", "-1"], "--rounds", ">= 0"),
+        (["distill", "--out", "d", "--nll-beta", "2"], "--nll-beta", ">= 0 and <= 1"),
+        (["distill", "--out", "d", "--hidden", "0"], "--hidden[0]", ">= 1"),
+        (["train", "crowdnav++", "--out", "t", "--envs", "0"], "--envs", ">= 1"),
+        (["train", "crowdnav++", "--out", "t", "--bc-lr", "0"], "--bc-lr", "> 0"),
+        (
+            ["reward", "fit", "--demos", "d", "--out", "m", "--max-inducing", "0"],
+            "--max-inducing",
+            ">= 1",
+        ),
+    ],
+)
+def test_a_config_value_out_of_range_is_refused_naming_its_flag(argv, flag, bound, capsys):
+    assert _exit_code(argv) == 2
+    captured = capsys.readouterr()
+    (line,) = captured.err.strip("\n").splitlines()
+    assert line.startswith(f"pioneer: error: {flag}: expected ") and bound in line
+    assert_house_message(line, flag)
+
+
+@pytest.mark.parametrize(
+    ("path", "configs"),
+    [
+        (["distill"], ["DaggerConfig", "StudentConfig"]),
+        (["train", "crowdnav++"], ["PPOConfig", "WarmStartConfig"]),
+        (["reward", "fit"], ["RewardRecipe", "DensityConfig"]),
+        (["demos", "generate"], ["Selection"]),
+    ],
+)
+def test_every_field_of_a_nested_config_is_a_flag(path, configs, capsys):
+    """The flags are the configs' fields, as registered (renamed, or left out)."""
+    import dataclasses
+    import re
+
+    from pioneer.cli._parse import _FLAGS, _shown, flag_name
+
+    assert _exit_code([*path, "--help"]) == 0
+    out = capsys.readouterr().out
+    by_name = {cls.__name__: cls for cls in _FLAGS}
+    for name in configs:
+        cls = by_name[name]
+        for f in dataclasses.fields(cls):
+            if dataclasses.is_dataclass(f.default):
+                continue  # a nested config: its own group
+            listed = re.search(re.escape(flag_name(cls, f.name)) + r"[ ,\n]", out) is not None
+            assert listed == _shown(cls, f.name), (name, f.name)
+
+
+def test_config_flags_refuses_unknown_fields_and_a_second_meaning():
+    from pioneer.cli._parse import config_flags
+
+    with pytest.raises(TypeError, match="no fields"):
+        config_flags(PPOConfig, total_step="steps")
+    with pytest.raises(TypeError, match="other flags"):
+        config_flags(PPOConfig, total_steps="n")
+    config_flags(PPOConfig, total_steps="steps", n_envs="envs")  # the same again: fine

@@ -126,8 +126,10 @@ def test_reward_fit_bad_inputs_are_one_line(demos_file, tmp_path, capsys):
     assert main(["reward", "fit", "--demos", str(truncated), "--out", str(out)]) == 2
     _one_line_error(capsys, "truncated")
     argv = ["reward", "fit", "--demos", str(demos_file), "--out", str(out), "--lam", "-1"]
-    assert main(argv) == 2
-    _one_line_error(capsys, "lam")
+    with pytest.raises(SystemExit) as refused:  # a value out of range: the command line's fault
+        main(argv)
+    assert refused.value.code == 2
+    _one_line_error(capsys, "--lam", "> 0")
     # three episodes: no held-out split has both signs
     assert (
         main(["reward", "fit", "--demos", str(demos_file), "--out", str(out), "--select-length"])

@@ -33,6 +33,7 @@ from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set
+from pioneer.learn.models import StudentConfig
 from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
 from pioneer.sim.scenarios import ScenarioConfig, StaticStudyLayout, static_study_scenario
 from pioneer.sim.scenarios import registry as scenarios
@@ -512,9 +513,9 @@ def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
 @pytest.mark.parametrize(
     ("changes", "needle"),
     [
-        ({"student": "mlp"}, "student"),
+        ({"student": StudentConfig(kind="mlp")}, "student.kind"),
         ({"seed": 1}, "seed"),
-        ({"action_mode": "mean"}, "action_mode"),
+        ({"student": StudentConfig(action_mode="mean")}, "student.action_mode"),
     ],
 )
 def test_rerun_with_other_settings_is_refused(run_mdn, reward_file, changes, needle):
@@ -561,7 +562,9 @@ def test_teacher_label_prev_smooths_with_the_teachers_own_previous_label(tmp_pat
 
 
 def test_mlp_student_run(tmp_path, reward_file):
-    cfg = TINY_CFG.replace(student="mlp", teacher_episodes=1, rounds=1, episodes_per_round=1)
+    cfg = TINY_CFG.replace(
+        student=StudentConfig(kind="mlp"), teacher_episodes=1, rounds=1, episodes_per_round=1
+    )
     res = run_dagger(cfg, tmp_path / "mlp", workers=1, reward=reward_file, progress=False)
     model = load_student(res.student)
     assert isinstance(model, MLPStudent)
@@ -576,7 +579,12 @@ def test_mlp_student_run(tmp_path, reward_file):
 
 
 def test_mean_action_run_drives_and_ships_the_mixture_mean(tmp_path, reward_file):
-    cfg = TINY_CFG.replace(action_mode="mean", teacher_episodes=1, rounds=1, episodes_per_round=1)
+    cfg = TINY_CFG.replace(
+        student=StudentConfig(action_mode="mean"),
+        teacher_episodes=1,
+        rounds=1,
+        episodes_per_round=1,
+    )
     res = run_dagger(cfg, tmp_path / "mean", workers=1, reward=reward_file, progress=False)
     for ckpt in (res.student, tmp_path / "mean/rounds/round-00/student.safetensors"):
         assert load_student(ckpt).config.action_mode == "mean"
@@ -590,17 +598,37 @@ def test_mean_action_run_drives_and_ships_the_mixture_mean(tmp_path, reward_file
     np.testing.assert_allclose(ep["applied"], mean, rtol=0, atol=1e-6)
 
 
-def test_a_run_from_before_the_action_mode_option_resumes(run_mdn, reward_file, tmp_path):
-    """A config.json without ``action_mode`` (written by an older version) means "mode"."""
+def _flat_layout(cfg: DaggerConfig) -> dict[str, Any]:
+    """``cfg`` as runs stored it before the student's settings were nested."""
+    d = cfg.to_dict()
+    student = d.pop("student")
+    flat = {"action_mode": student["action_mode"], "nll_beta": student["nll_beta"]}
+    return {**d, "student": student["kind"], **flat}
+
+
+def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_path):
+    """A config.json of the flat layout (``student`` the kind, ``action_mode`` and
+    ``nll_beta`` beside it), older still without ``action_mode`` (meaning "mode"), resumes
+    and is rewritten in the current layout."""
     res, _ = run_mdn
     out = tmp_path / "old"
     shutil.copytree(res.out, out)
-    old = json.loads((out / "config.json").read_text())
+    old = _flat_layout(TINY_CFG)
     del old["action_mode"]
     (out / "config.json").write_text(json.dumps(old))
     again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
     assert again.curves == res.curves
     assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+
+
+def test_the_flat_layout_of_older_runs_and_checkpoints_reads_as_the_nested_one():
+    mlp = TINY_CFG.replace(student=StudentConfig(kind="mlp", action_mode="mean"))
+    assert DaggerConfig.from_dict(_flat_layout(mlp)) == mlp
+    assert DaggerConfig.from_dict({"student": "mlp"}).student == StudentConfig(kind="mlp")
+    assert DaggerConfig.from_dict({"rounds": 3}) == DaggerConfig(rounds=3)
+    with pytest.raises(ConfigError) as err:
+        DaggerConfig.from_dict({"action_mode": "median"})
+    assert_house_message(str(err.value), "StudentConfig.action_mode")
 
 
 def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):
@@ -629,7 +657,7 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file
     ("changes", "needle"),
     [
         ({"rounds": -1}, "rounds"),
-        ({"student": "cnn"}, "student"),
+        ({"student": "cnn"}, "DaggerConfig.student"),
         ({"teacher_episodes": 0}, "teacher_episodes"),
         ({"episodes_per_round": 0}, "episodes_per_round"),
         ({"epochs_initial": 0}, "epochs_initial"),
@@ -639,7 +667,6 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file
         ({"rounds": 1.5}, "rounds"),
         ({"lr": 0.0}, "lr"),
         ({"lr": math.nan}, "lr"),
-        ({"action_mode": "median"}, "action_mode"),
         ({"label_prev": "student"}, "label_prev"),
     ],
 )

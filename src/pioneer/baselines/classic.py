@@ -16,6 +16,7 @@ from annotated_types import Ge
 from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative, Positive
+from pioneer.config import default
 from pioneer.envs.policy import Decision
 from pioneer.errors import ConfigError, expect
 from pioneer.limits import OMEGA_MAX, V_MAX
@@ -137,7 +138,8 @@ class DWAPolicy:
                 expect("DWAPolicy.human_model", "'static' or 'constant_velocity'", human_model, "")
             )
         if n_v < 2 or n_omega < 2:
-            raise ConfigError(expect("DWAPolicy.n_v/n_omega", ">= 2", (n_v, n_omega), "use 7, 15"))
+            fix = f"use {default(DWAPolicy, 'n_v')}, {default(DWAPolicy, 'n_omega')}"
+            raise ConfigError(expect("DWAPolicy.n_v/n_omega", ">= 2", (n_v, n_omega), fix))
         self.accel_v = accel_v  # [m/s²]
         self.accel_omega = accel_omega  # [rad/s²]
         self.n_v = n_v

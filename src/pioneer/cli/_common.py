@@ -5,17 +5,18 @@ from __future__ import annotations
 
 import dataclasses
 import errno
-import inspect
 import os
 import sys
 import typing
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Protocol
 
 import tyro
 from annotated_types import Ge
 
+from pioneer.cli._parse import config_flags, flag_name
+from pioneer.config import default
 from pioneer.errors import ConfigError, expect
 
 if TYPE_CHECKING:
@@ -33,7 +34,9 @@ __all__ = [
     "Workers",
     "check_outputs",
     "command_line",
+    "config_flags",
     "default",
+    "flag_name",
     "metavar",
     "one_of",
     "optional",
@@ -48,22 +51,6 @@ class Command(Protocol):
     def run(self) -> int:
         """Do the work; a :class:`~pioneer.errors.PioneerError` becomes one line, exit 2."""
         ...
-
-
-def default(owner: Callable[..., object], name: str) -> Any:
-    """The default of field or parameter ``name`` of ``owner`` (a config dataclass, a class or
-    a function): a flag's default is declared once, where the value is used."""
-    if dataclasses.is_dataclass(owner):
-        for f in dataclasses.fields(owner):
-            if f.name == name and f.default is not dataclasses.MISSING:
-                return f.default
-            if f.name == name and f.default_factory is not dataclasses.MISSING:
-                return f.default_factory()
-    else:
-        param = inspect.signature(owner).parameters.get(name)
-        if param is not None and param.default is not inspect.Parameter.empty:
-            return param.default
-    raise TypeError(f"{getattr(owner, '__qualname__', owner)} declares no default for {name!r}")
 
 
 def one_of(values: Iterable[str]) -> Any:

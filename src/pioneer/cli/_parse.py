@@ -1,4 +1,12 @@
-"""tyro, with every refusal of a command line as one line on stderr and exit code 2.
+"""tyro, with every refusal of a command line as one line on stderr and exit code 2, and
+config dataclasses as groups of a command's options.
+
+A command nests a config (``dagger: tyro.conf.OmitArgPrefixes[DaggerConfig] =
+DaggerConfig()``) instead of re-declaring its fields: every field becomes a flag with the
+field's default, bounds, choices and help (its docstring or comment). :func:`config_flags`
+registers how a config's fields appear (a flag renamed, a field left out); a config nested in
+a command must be registered, so that its values are checked with the flags named. tyro builds
+the config through a struct rule of ours (:data:`REGISTRY`, tyro's public constructor API).
 
 tyro reports a bad command line in a multi-line box. Its parse-error hook (``tyro._errors``,
 private and marked unstable in tyro 1.0) hands the refusal over as data: we word it as the
@@ -17,10 +25,12 @@ import re
 import sys
 import typing
 from collections.abc import Iterator, Sequence
-from typing import Any, NoReturn, TypeVar
+from typing import Annotated, Any, NoReturn, TypeVar
 
 import tyro
+from tyro.constructors import ConstructorRegistry, StructConstructorSpec, StructTypeInfo
 
+from pioneer.config import check_values
 from pioneer.errors import expect
 
 try:  # where tyro has the hook; elsewhere its box is flattened (see _flatten)
@@ -30,9 +40,77 @@ except ImportError:  # pragma: no cover - depends on the installed tyro
 if not hasattr(tyro_errors, "on_parse_error"):  # pragma: no cover - as above
     tyro_errors = None  # type: ignore[assignment]
 
-__all__ = ["one_line", "parse", "refuse"]
+__all__ = ["REGISTRY", "config_flags", "flag_name", "one_line", "parse", "refuse"]
 
 T = TypeVar("T")
+
+REGISTRY = ConstructorRegistry()  # builds the configs registered with config_flags
+_FLAGS: dict[type, dict[str, tuple[Any, ...]]] = {}  # config → field → extra tyro settings
+_BUILDING: set[type] = set()  # configs whose default spec the rule is asking tyro for
+
+
+def config_flags(cls: type, **fields: Any) -> None:
+    """Register config dataclass ``cls`` for nesting in commands, its fields as flags without
+    a prefix (``--rounds``): ``name="flag_name"`` renames a field's flag, ``name=None`` leaves
+    the field out (it keeps its default), and a tyro setting (``tyro.conf.arg(…)``, e.g. a
+    metavar) is added to the field's. Registering a class again must say the same."""
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no fields {unknown} (known: {sorted(known)})")
+    marks = {
+        name: (
+            (tyro.conf.Suppress,)
+            if how is None
+            else (tyro.conf.arg(name=how),)
+            if isinstance(how, str)
+            else (how,)
+        )
+        for name, how in fields.items()
+    }
+    if _FLAGS.setdefault(cls, marks) != marks:
+        raise TypeError(f"{cls.__name__} is registered with other flags: {_FLAGS[cls]}")
+
+
+def flag_name(cls: type, name: str) -> str:
+    """The flag of field ``name`` of a registered config (``--name``, or its new name)."""
+    for mark in _FLAGS.get(cls, {}).get(name, ()):
+        if isinstance(getattr(mark, "name", None), str):
+            name = mark.name
+    return "--" + name.replace("_", "-")
+
+
+def _shown(cls: type, name: str) -> bool:
+    """Whether field ``name`` of a registered config is a flag (not left out)."""
+    return tyro.conf.Suppress not in _FLAGS.get(cls, {}).get(name, ())
+
+
+@REGISTRY.struct_rule
+def _config_rule(info: StructTypeInfo) -> Any:
+    """A registered config as tyro's default spec, each field with its registered settings,
+    built after its values pass the config's declared checks named by their flags."""
+    cls = info.type
+    if cls not in _FLAGS or cls in _BUILDING:
+        return None
+    _BUILDING.add(cls)
+    try:
+        spec = ConstructorRegistry.get_struct_spec(info)
+    finally:
+        _BUILDING.discard(cls)
+    if not isinstance(spec, StructConstructorSpec):
+        return spec
+    marks = _FLAGS[cls]
+
+    def marked(f: Any) -> Any:
+        return dataclasses.replace(f, type=Annotated[(f.type, *marks[f.name])])
+
+    fields = tuple(marked(f) if f.name in marks else f for f in spec.fields)
+
+    def instantiate(**values: Any) -> Any:
+        check_values(cls, values, lambda name: flag_name(cls, name))
+        return spec.instantiate(**values)
+
+    return StructConstructorSpec(instantiate=instantiate, fields=fields)
 
 
 class _Refused(Exception):
@@ -75,7 +153,9 @@ def parse(
     box = io.StringIO()
     try:
         with _hook(cls, args, label or prog), contextlib.redirect_stderr(box):
-            return tyro.cli(cls, args=list(args), prog=prog, description=description)
+            return tyro.cli(
+                cls, args=list(args), prog=prog, description=description, registry=REGISTRY
+            )
     except _Refused as refusal:
         refuse(str(refusal))
     except SystemExit as exc:
@@ -185,7 +265,8 @@ def _unrecognized(tokens: Sequence[str], cls: type, args: Sequence[str], prog: s
 
 
 def _flags(cls: type) -> list[str]:
-    """The ``--flags`` of an options dataclass (those of nested option groups unprefixed)."""
+    """The ``--flags`` of an options dataclass (those of nested option groups unprefixed, a
+    registered config's as registered)."""
     if not dataclasses.is_dataclass(cls):
         return []
     hints = typing.get_type_hints(cls)
@@ -194,8 +275,8 @@ def _flags(cls: type) -> list[str]:
         nested = hints[f.name]
         if isinstance(nested, type) and dataclasses.is_dataclass(nested):
             out += _flags(nested)
-        else:
-            out.append("--" + f.name.replace("_", "-"))
+        elif _shown(cls, f.name):
+            out.append(flag_name(cls, f.name))
     return out
 
 

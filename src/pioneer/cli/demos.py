@@ -7,12 +7,27 @@ from typing import Annotated
 
 import tyro
 
-from pioneer.cli._common import OutFile, Seed, command_line, default, metavar, optional
+from pioneer.cli._common import (
+    OutFile,
+    Seed,
+    command_line,
+    config_flags,
+    default,
+    metavar,
+    optional,
+)
 from pioneer.demos.generate import Demonstrator, Selection, generate
 from pioneer.demos.teleop import TeleopSession
 from pioneer.io import to_json
 
 __all__ = ["DemosGenerate", "DemosShow", "Teleop"]
+
+config_flags(
+    Selection,
+    max_time_s=tyro.conf.arg(name="max_time", metavar="S"),
+    max_path_m=tyro.conf.arg(name="max_path", metavar="M"),
+    min_gap_m=tyro.conf.arg(name="min_gap", metavar="M"),
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,12 +47,8 @@ class DemosGenerate:
     """seed of the first episode"""
     demonstrator: Demonstrator = default(generate, "demonstrator")
     """positives from the rules-only teacher or the scripted courteous driver"""
-    max_time: Annotated[float, metavar("S")] = Selection.max_time_s
-    """keep successful episodes of at most this many seconds"""
-    max_path: Annotated[float, metavar("M")] = Selection.max_path_m
-    """… and at most this path length [m]"""
-    min_gap: Annotated[float, metavar("M")] = Selection.min_gap_m
-    """… that never came closer to a person than this [m]"""
+    selection: tyro.conf.OmitArgPrefixes[Selection] = Selection()
+    """which successful episodes make positive demonstrations"""
 
     def run(self) -> int:
         """Generate and save; print the dataset's summary (JSON)."""
@@ -48,7 +59,7 @@ class DemosGenerate:
             seed=self.seed,
             command=command_line(),
             demonstrator=self.demonstrator,
-            selection=Selection(self.max_time, self.max_path, self.min_gap),
+            selection=self.selection,
         )
         d.save(self.out)
         print(to_json({"out": self.out, **d.summary()}))

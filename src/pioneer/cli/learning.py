@@ -1,8 +1,9 @@
 """``pioneer distill`` (DAgger students) and ``pioneer train crowdnav++`` (the PPO baseline).
 
-Every default is the one of the config the options fill (``DaggerConfig``, ``PPOConfig``,
-``WarmStartConfig``) or of the function they are passed to, read with
-:func:`~pioneer.cli._common.default`.
+Their options are the configs they fill (``DaggerConfig`` with its ``StudentConfig``,
+``PPOConfig``, ``WarmStartConfig``), nested as groups of flags: the flags, defaults, bounds and
+help come from the configs; other defaults are those of the function the options are passed to,
+read with :func:`~pioneer.cli._common.default`.
 """
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
-from pioneer.baselines.crowdnav.imitation import EXPERTS, WarmStartConfig
+import tyro
+
+from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 from pioneer.baselines.sb3 import train_sb3_ppo
 from pioneer.cli._common import (
@@ -19,36 +22,33 @@ from pioneer.cli._common import (
     Seed,
     Workers,
     command_line,
+    config_flags,
     default,
+    flag_name,
     metavar,
     one_of,
     optional,
     require_some,
 )
-from pioneer.deploy.mixture import ACTION_MODES
-from pioneer.deploy.mixture import ActionMode as DaggerActionMode
 from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
-from pioneer.learn.dagger import LABEL_PREV, DaggerConfig, run_dagger
-from pioneer.learn.dagger import LabelPrev as DaggerLabelPrev
-from pioneer.learn.models import KINDS, StudentKind
+from pioneer.laser import UnseenRule as LaserUnseenRule
+from pioneer.learn.dagger import DaggerConfig, run_dagger
+from pioneer.learn.models import MDN_ONLY, StudentConfig
 
 if TYPE_CHECKING:
-    Student: TypeAlias = StudentKind
-    ActionMode: TypeAlias = DaggerActionMode
-    LabelPrev: TypeAlias = DaggerLabelPrev
-    Expert: TypeAlias = str
-    UnseenRule: TypeAlias = str
+    UnseenRule: TypeAlias = LaserUnseenRule
 else:
-    Student = one_of(KINDS)
-    ActionMode = one_of(ACTION_MODES)
-    LabelPrev = one_of(LABEL_PREV)
-    Expert = one_of(EXPERTS)
     UnseenRule = one_of(UNSEEN_RULES)
 
 __all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
+
+config_flags(DaggerConfig)
+config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
+config_flags(PPOConfig, total_steps="steps", n_envs="envs")
+config_flags(WarmStartConfig, expert="bc_expert")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,28 +57,8 @@ class Distill:
 
     out: OutDir
     """output folder (resumes if it exists)"""
-    scenario: str = default(DaggerConfig, "scenario")
-    """hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)"""
-    student: Student = default(DaggerConfig, "student")
-    """the student network"""
-    action_mode: ActionMode = default(DaggerConfig, "action_mode")
-    """MDN's executed action"""
-    nll_beta: float = default(DaggerConfig, "nll_beta")
-    """MDN's β-NLL exponent in [0, 1]"""
-    label_prev: LabelPrev = default(DaggerConfig, "label_prev")
-    """u_{t-1} in the teacher's smoothed label on student-driven steps"""
-    teacher_episodes: int = default(DaggerConfig, "teacher_episodes")
-    """round 0 episodes"""
-    rounds: int = default(DaggerConfig, "rounds")
-    """student-driven rounds"""
-    episodes_per_round: int = default(DaggerConfig, "episodes_per_round")
-    """episodes of every later round"""
-    epochs_initial: int = default(DaggerConfig, "epochs_initial")
-    """epochs after round 0"""
-    epochs_per_round: int = default(DaggerConfig, "epochs_per_round")
-    """epochs after later rounds"""
-    seed: Seed = default(DaggerConfig, "seed")
-    """seeds the networks and the DAgger episodes"""
+    dagger: tyro.conf.OmitArgPrefixes[DaggerConfig] = DaggerConfig()
+    """the DAgger run (defaults: the paper's, §V-B.2)"""
     workers: Workers = None
     """processes collecting episodes"""
     reward: Annotated[str | None, optional("FILE", "fit on the shipped demos")] = None
@@ -87,20 +67,7 @@ class Distill:
     def run(self) -> int:
         """Run (or resume) DAgger; print where the student is."""
         self._check_student_flags()
-        cfg = DaggerConfig(
-            scenario=self.scenario,
-            student=self.student,
-            action_mode=self.action_mode,
-            nll_beta=self.nll_beta,
-            label_prev=self.label_prev,
-            teacher_episodes=self.teacher_episodes,
-            rounds=self.rounds,
-            episodes_per_round=self.episodes_per_round,
-            epochs_initial=self.epochs_initial,
-            epochs_per_round=self.epochs_per_round,
-            seed=self.seed,
-        )
-        res = run_dagger(cfg, self.out, self.workers, reward=self.reward)
+        res = run_dagger(self.dagger, self.out, self.workers, reward=self.reward)
         last = res.curves[-1]
         print(
             f"student: {res.student}  ({last['frames_total']} frames, last round SR "
@@ -109,14 +76,22 @@ class Distill:
         return 0
 
     def _check_student_flags(self) -> None:
-        """--action-mode and --nll-beta shape the MDN: with --student mlp they are refused,
-        not ignored."""
-        if self.student == "mdn":
+        """The MDN's own settings (--action-mode, --nll-beta, …) with --student mlp are
+        refused, not ignored."""
+        student = self.dagger.student
+        if student.kind == "mdn":
             return
-        for flag, name in (("--action-mode", "action_mode"), ("--nll-beta", "nll_beta")):
-            if getattr(self, name) != default(DaggerConfig, name):
+        kind = flag_name(StudentConfig, "kind")
+        for name in MDN_ONLY:
+            if getattr(student, name) != default(StudentConfig, name):
+                flag = flag_name(StudentConfig, name)
                 raise ConfigError(
-                    expect(flag, "--student mdn (an MDN setting)", "--student mlp", f"drop {flag}")
+                    expect(
+                        flag,
+                        f"{kind} mdn (an MDN setting)",
+                        f"{kind} {student.kind}",
+                        f"drop {flag}",
+                    )
                 )
 
 
@@ -128,30 +103,10 @@ class TrainCrowdNav:
     """output folder (checkpoint, policy, curve)"""
     scenario: str = "hr-rl"
     """hr-rl, hl-rr, …"""
-    steps: int = default(PPOConfig, "total_steps")
-    """total environment steps"""
-    envs: int = default(PPOConfig, "n_envs")
-    """environments stepped together"""
-    seed: Seed = default(PPOConfig, "seed")
-    """seeds the weights, the action noise, the minibatches and the episodes"""
-    lr: float = default(PPOConfig, "lr")
-    """Adam learning rate"""
-    entropy_coef: float = default(PPOConfig, "entropy_coef")
-    """PPO entropy bonus"""
-    bc_episodes: int = default(WarmStartConfig, "bc_episodes")
-    """expert demonstrations to imitate first (0: no imitation)"""
-    bc_expert: Expert = default(WarmStartConfig, "expert")
-    """the demonstrator (sfm, dwa: independent of PioneeR; teacher: PioneeR's own)"""
-    bc_epochs: int = default(WarmStartConfig, "bc_epochs")
-    """behaviour-cloning epochs"""
-    dagger_rounds: int = default(WarmStartConfig, "dagger_rounds")
-    """DAgger rounds after cloning"""
-    dagger_episodes: int = default(WarmStartConfig, "dagger_episodes")
-    """episodes per DAgger round"""
-    critic_warmup: int = default(WarmStartConfig, "critic_warmup")
-    """[updates] critic-only updates before PPO"""
-    checkpoint_every: int = default(PPOConfig, "checkpoint_every")
-    """[updates] between checkpoints"""
+    ppo: tyro.conf.OmitArgPrefixes[PPOConfig] = PPOConfig()
+    """PPO settings"""
+    warm: tyro.conf.OmitArgPrefixes[WarmStartConfig] = WarmStartConfig()
+    """imitation warm start and critic warm-up (all off by default: pure PPO)"""
     threads: int = default(train_crowdnav, "torch_threads")
     """torch threads"""
     resume: Flag = False
@@ -159,27 +114,11 @@ class TrainCrowdNav:
 
     def run(self) -> int:
         """Train (or resume); print the outputs and the final statistics (JSON lines)."""
-        ppo = PPOConfig(
-            total_steps=self.steps,
-            n_envs=self.envs,
-            lr=self.lr,
-            entropy_coef=self.entropy_coef,
-            seed=self.seed,
-            checkpoint_every=self.checkpoint_every,
-        )
-        warm = WarmStartConfig(
-            expert=self.bc_expert,
-            bc_episodes=self.bc_episodes,
-            bc_epochs=self.bc_epochs,
-            dagger_rounds=self.dagger_rounds,
-            dagger_episodes=self.dagger_episodes,
-            critic_warmup=self.critic_warmup,
-        )
         summary = train_crowdnav(
             self.scenario,
             self.out,
-            ppo,
-            warm=warm,
+            self.ppo,
+            warm=self.warm,
             resume=True if self.resume else None,
             command=command_line(),
             torch_threads=self.threads,

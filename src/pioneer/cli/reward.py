@@ -1,34 +1,38 @@
 """``pioneer reward fit|show`` (the learned density reward) and ``pioneer study static``
 (paper Fig. 3, the reward on the synthetic static study).
 
-The fit's defaults are ``DensityConfig``'s, read with :func:`~pioneer.cli._common.default`.
+The fit's options are the ``RewardRecipe`` it follows, with its ``DensityConfig``, nested as a
+group of flags (flags, defaults, bounds and help from the configs).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import sys
-from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
+from typing import TYPE_CHECKING, Annotated, Any
 
-from pioneer.cli._common import Flag, OutDir, OutFile, default, metavar, one_of, optional
+import tyro
+
+from pioneer.cli._common import Flag, OutDir, OutFile, config_flags, metavar, optional
 from pioneer.data import DEMOS_DIR
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json
 from pioneer.reward.default import RewardRecipe
-from pioneer.reward.density import INDUCING, DensityConfig
-from pioneer.reward.density import Inducing as DensityInducing
+from pioneer.reward.density import DensityConfig
 from pioneer.reward.features import FEATURE_MAPS
 
 if TYPE_CHECKING:
     from pioneer.reward.density import DensityReward
 
-    Features: TypeAlias = str
-    Inducing: TypeAlias = DensityInducing
-else:
-    Features = one_of(FEATURE_MAPS)
-    Inducing = one_of(INDUCING)
-
 __all__ = ["RewardFit", "RewardShow", "StudyStatic"]
+
+# mirror: set by --mirror-demos (the mirror scenario's dataset)
+config_flags(
+    RewardRecipe,
+    mirror=None,
+    features=optional("{" + ",".join(FEATURE_MAPS) + "}", "by scenario"),
+)
+config_flags(DensityConfig, length_scale=optional("L", "the median heuristic"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,30 +43,12 @@ class RewardFit:
     """the dataset (.npz)"""
     out: OutFile
     """output model .npz"""
-    features: Annotated[
-        Features | None, optional("{xy,obs_action,obs_action_sincos}", "by scenario")
-    ] = None
-    """the feature map"""
-    length_scale: Annotated[float | None, optional("L", "the median heuristic")] = default(
-        DensityConfig, "length_scale"
-    )
-    """l in standardised units"""
+    recipe: tyro.conf.OmitArgPrefixes[RewardRecipe] = RewardRecipe()
+    """how the reward is made from the demonstrations"""
     select_length: Flag = False
     """pick l by held-out AUROC"""
-    lam: float = default(DensityConfig, "lam")
-    """λ, weight of the RKHS-norm regulariser"""
-    beta: float = default(DensityConfig, "beta")
-    """β, weight of the coefficient-norm regulariser"""
-    max_inducing: int = default(DensityConfig, "max_inducing")
-    """above this many demos, choose a subset of inducing points"""
-    inducing: Inducing = default(DensityConfig, "inducing")
-    """how the subset is chosen: k-means medoids or farthest-point sampling"""
     min_gamma: Annotated[float | None, optional("G", "keep all")] = None
     """drop samples with γ below this"""
-    length_scale_factor: float = default(DensityConfig, "length_scale_factor")
-    """multiplies the median-heuristic length scale"""
-    gamma: Literal["labels", "graded"] = default(RewardRecipe, "gamma")
-    """the demos' ±1 labels, or γ graded by each episode's quality (time, margin, smoothness)"""
     mirror_demos: Annotated[str | None, optional("FILE", "no mirror augmentation")] = None
     """the mirror scenario's dataset (.npz), added mirrored (hl-rr's for hr-rl)"""
     allow_one_sided: Flag = False
@@ -104,23 +90,14 @@ class RewardFit:
                 file=sys.stderr,
             )
         mirror = Dataset.load(self.mirror_demos) if self.mirror_demos else None
-        fm = feature_map(self.features or default_feature_map(d.scenarios))
-        cfg = DensityConfig(
-            length_scale=self.length_scale,
-            length_scale_factor=self.length_scale_factor,
-            lam=self.lam,
-            beta=self.beta,
-            max_inducing=self.max_inducing,
-            inducing=self.inducing,
-        )
+        fm = feature_map(self.recipe.features or default_feature_map(d.scenarios))
+        cfg = self.recipe.density
         records = None
         if self.select_length:
             z = fm.from_dataset(d)
             length, records = select_length_scale(z, d.gamma, d.episode, cfg)
             cfg = cfg.replace(length_scale=length)
-        recipe = RewardRecipe(
-            gamma=self.gamma, mirror=mirror is not None, features=fm.name, density=cfg
-        )
+        recipe = self.recipe.replace(mirror=mirror is not None, features=fm.name, density=cfg)
         model = fit_reward(d, recipe, mirror)
         model.info_["demos"] = str(self.demos)
         if mirror is not None:

@@ -21,6 +21,7 @@ from pioneer.cli._common import (
 from pioneer.experiments.calibration import calibrate
 from pioneer.experiments.reproduce import SCENARIOS
 from pioneer.io import inside, output_dir
+from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
 
 if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
@@ -115,14 +116,13 @@ class SampleLayouts:
     """layouts to draw"""
     seed: Seed = 0
     """seed of the draws"""
-    prefix: str = "general"
+    prefix: str = default(sample_variants, "prefix")
     """variant names: PREFIX-0000, PREFIX-0001, …"""
 
     def run(self) -> int:
         """Draw, write the file, print a summary line."""
         from pioneer.io import check_name, to_json, write_text_atomic
         from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
-        from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
 
         check_name("--prefix", self.prefix)  # the variants' names become file names
         dist = LayoutDistribution()

@@ -18,7 +18,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import typing
 from collections.abc import Callable
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,9 +29,14 @@ from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
 from pioneer.sim.world import State, World, advance, observe_states, step
 
-__all__ = ["Rollout", "rollout"]
+__all__ = ["HORIZON", "HUMAN_MODEL", "STEP", "HumanModel", "Rollout", "rollout"]
 
 F64 = NDArray[np.float64]
+HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the people
+# The teacher's rollouts (paper §IV-A.2; the defaults of TeacherConfig):
+HORIZON = 3.0  # [s] T, each candidate held this long
+STEP = 0.3  # [s] Δt of a rollout step
+HUMAN_MODEL: HumanModel = "privileged"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,16 +78,16 @@ def rollout(
     world: World,
     state: State,
     commands: F64,
-    horizon: float = 3.0,
-    dt: float = 0.3,
-    human_model: str = "privileged",
+    horizon: float = HORIZON,
+    dt: float = STEP,
+    human_model: HumanModel = HUMAN_MODEL,
 ) -> Rollout:
     """Roll every command of ``commands (C, 2)`` forward from ``state`` (B = 1)."""
     if state.batch_size != 1:
         raise ConfigError(
             expect("rollout state", "a single state (B = 1)", state.batch_size, "take(i)")
         )
-    if human_model not in ("privileged", "constant_velocity"):
+    if human_model not in typing.get_args(HumanModel):
         raise ConfigError(
             expect("human_model", "'privileged' or 'constant_velocity'", human_model, "pick one")
         )

@@ -28,7 +28,7 @@ from annotated_types import Interval
 from numpy.typing import NDArray
 
 from pioneer.config import Config
-from pioneer.control.rollout import Rollout, rollout
+from pioneer.control.rollout import HORIZON, HUMAN_MODEL, STEP, HumanModel, Rollout, rollout
 from pioneer.envs.policy import Decision
 from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
@@ -46,7 +46,6 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 ExtraScore = Callable[[Rollout, State, World], F64]
-HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the people
 Fallback = Literal["stop", "evade"]  # what the teacher does when no candidate is feasible
 
 
@@ -57,9 +56,9 @@ class TeacherConfig(Config):
     v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)  # [m/s]
     n_omega: int = 15  # ω values evenly spaced in [−ω_max, ω_max]
     omega_max: float = OMEGA_MAX  # [rad/s]
-    horizon: float = 3.0  # [s] T
-    dt: float = 0.3  # [s] rollout step Δt
-    human_model: HumanModel = "privileged"
+    horizon: float = HORIZON  # [s] T
+    dt: float = STEP  # [s] rollout step Δt
+    human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: float = 0.0  # [m] predicted human gap below this is infeasible
     # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
@@ -230,8 +229,8 @@ def make_teacher(
     density: bool = True,
     goal: bool = True,
     obstacle: bool = True,
-    human_model: HumanModel = "privileged",
-    fallback: Fallback = "evade",
+    human_model: HumanModel = TeacherConfig.human_model,
+    fallback: Fallback = TeacherConfig.fallback,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on

@@ -64,7 +64,6 @@ __all__ = [
 KEYS = ("up", "down", "left", "right", "space", "n", "b", "r", "escape")
 V_STEP = 0.1  # [m/s] per UP/DOWN press
 OMEGA_STEP = 0.2  # [rad/s] per LEFT/RIGHT press
-FPS = 10  # ticks per second with realtime=True (the control rate, Δt = 0.1 s)
 STATUS_HEIGHT = 68  # [px] text area below the scene (three lines)
 MIN_WIDTH = 600  # [px] the text needs this much; narrower scenes are centred
 MESSAGE_TICKS = 40  # how long an end-of-episode message stays on screen
@@ -384,7 +383,7 @@ class TeleopSession:
             return False
         self.render()
         if self.realtime:
-            self._clock.tick(FPS)
+            self._clock.tick(1.0 / self.dt)  # the scenario's control rate
         return True
 
     def run(self) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
+from pioneer.config import default
 from pioneer.deploy.runtime import RuntimeDecision, StudentRuntime
 from pioneer.errors import ConfigError, DataError, PioneerError, expect
 from pioneer.io import atomic_path
@@ -119,7 +120,8 @@ def _pick_topic(
 
 def _check_goal(goal: Sequence[float], goal_frame: str) -> tuple[float, float]:
     if goal_frame not in GOAL_FRAMES:
-        raise ConfigError(expect("goal_frame", f"one of {GOAL_FRAMES}", goal_frame, "use 'robot'"))
+        fix = f"use {default(replay_bag, 'goal_frame')!r}"
+        raise ConfigError(expect("goal_frame", f"one of {GOAL_FRAMES}", goal_frame, fix))
     g = tuple(float(c) for c in goal)
     if len(g) != 2 or not all(math.isfinite(c) for c in g):
         raise ConfigError(expect("goal", "finite (x, y) [m]", list(goal), "pass --goal X Y"))

@@ -20,6 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.config import default
 from pioneer.errors import ConfigError, expect
 
 __all__ = ["ACTION_MODES", "ActionMode", "mixture_action", "mixture_uncertainty", "softmax"]
@@ -70,4 +71,5 @@ def mixture_action(
     if mode == "mean":
         mean: NDArray[np.float64] = np.sum(softmax(logits)[..., None] * m, axis=-2)
         return mean
-    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))
+    fix = f"use {default(mixture_action, 'mode')!r}"
+    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))

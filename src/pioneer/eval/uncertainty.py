@@ -140,7 +140,8 @@ def table_iv_markdown(results: Mapping[str, Mapping[str, Any]], scenarios: Seque
         p = PAPER_TABLE_IV.get(sc)
         if p is not None:
             lines.append(
-                f"| | paper | 0.8 m | {p['epistemic_safe']:.3f} | {p['aleatoric_safe']:.3f} | "
+                f"| | paper | {RISKY_DISTANCE_M:g} m | {p['epistemic_safe']:.3f} | "
+                f"{p['aleatoric_safe']:.3f} | "
                 f"{p['epistemic_risky']:.3f} | {p['aleatoric_risky']:.3f} | "
                 f"{int(p['frames_safe']):,} / {int(p['frames_risky']):,} | – | – |"
             )

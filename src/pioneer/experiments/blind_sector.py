@@ -21,12 +21,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.config import default
 from pioneer.data import shipped_student
 from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import run_episode
 from pioneer.io import atomic_path, inside, output_dir, to_json
-from pioneer.laser import UNSEEN_RULES
+from pioneer.laser import UNSEEN_RULES, UnseenRule
 from pioneer.learn.export import export_onnx
 from pioneer.learn.models import load_student
 from pioneer.seeds import validation_seed
@@ -54,7 +55,8 @@ def scanner_message(
     g = beams.size
     inc = 2.0 * math.pi / g
     if not 0.0 < fov_rad <= 2.0 * math.pi:
-        raise ConfigError(expect("fov", "in (0°, 360°]", math.degrees(fov_rad), "use e.g. 270"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'fov_deg'):g}"
+        raise ConfigError(expect("fov", "in (0°, 360°]", math.degrees(fov_rad), fix))
     if fov_rad >= 2.0 * math.pi - 1e-9:
         idx = np.arange(g)
         k = 0
@@ -95,7 +97,7 @@ class ScannerPolicy:
         return np.array([d.v, d.omega])
 
 
-def _variants(fov_deg: float, rules: Sequence[str]) -> list[tuple[str, float, str]]:
+def _variants(fov_deg: float, rules: Sequence[UnseenRule]) -> list[tuple[str, float, UnseenRule]]:
     """``(label, fov [rad], rule)``: the full scanner (reference), then each rule at fov."""
     out = [("360°", 2.0 * math.pi, rules[0])]
     out += [(f"{fov_deg:g}° {rule}", math.radians(fov_deg), rule) for rule in rules]
@@ -107,7 +109,7 @@ def run_blind_sector_study(
     scenarios: Sequence[str] = SCENARIOS,
     episodes: int = 100,
     fov_deg: float = 270.0,
-    rules: Sequence[str] = UNSEEN_RULES,
+    rules: Sequence[UnseenRule] = UNSEEN_RULES,
 ) -> dict[str, Any]:
     """Run ``episodes`` validation episodes per scenario for the full scanner and for a
     ``fov_deg`` scanner under each rule; write ``episodes.jsonl`` and ``summary.json`` into
@@ -117,9 +119,11 @@ def run_blind_sector_study(
     if bad or not rules:
         raise ConfigError(expect("rules", f"some of {UNSEEN_RULES}", list(rules), "fix them"))
     if not 0.0 < fov_deg <= 360.0:
-        raise ConfigError(expect("--fov", "in (0°, 360°]", fov_deg, "use e.g. 270"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'fov_deg'):g}"
+        raise ConfigError(expect("--fov", "in (0°, 360°]", fov_deg, fix))
     if episodes < 1:
-        raise ConfigError(expect("--episodes", "an integer >= 1", episodes, "use e.g. 100"))
+        fix = f"use e.g. {default(run_blind_sector_study, 'episodes')}"
+        raise ConfigError(expect("--episodes", "an integer >= 1", episodes, fix))
     from pioneer.sim.scenarios import get_scenario
 
     students = {sc: shipped_student(get_scenario(sc).name) for sc in scenarios}

@@ -398,7 +398,7 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
     )
     return (
         "\n### Table IV — MDN uncertainty, safe vs risky frames (safe: robot centre → nearest "
-        "human surface > 0.8 m)\n\n"
+        f"human surface > {RISKY_DISTANCE_M:g} m)\n\n"
         + table_iv_markdown(results, SCENARIOS)
         + "\nSame analysis with the risky threshold at the quantile that gives the "
         "paper's risky share (8.1 % HR-RL, 4.6 % HL-RR):\n\n"

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -73,8 +73,9 @@ def file_version(path: str | os.PathLike[str]) -> tuple[str, int, int]:
 class RunFolder:
     """The files of one DAgger run in ``root``: episodes, the rounds' models (``model_file``
     in each round's folder) and the settings. ``what`` names the run in messages ("DAgger");
-    ``defaults`` fill settings that an older run's file lacks; ``free`` settings (the number
-    of rounds) may differ between runs."""
+    ``defaults`` fill settings that an older run's file lacks, ``upgrade`` (if given) reads a
+    stored file in today's layout instead; ``free`` settings (the number of rounds) may differ
+    between runs."""
 
     def __init__(
         self,
@@ -83,12 +84,14 @@ class RunFolder:
         what: str,
         defaults: Mapping[str, Any] | None = None,
         free: Collection[str] = (),
+        upgrade: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
     ) -> None:
         self.root = Path(root)
         self.model_file = model_file
         self.what = what
         self.defaults = dict(defaults or {})
         self.free = tuple(free)
+        self.upgrade = upgrade
 
     # ------------------------------------------------------------------ layout
     def round_dir(self, rnd: int) -> Path:
@@ -147,6 +150,11 @@ class RunFolder:
             ) from exc
         if not isinstance(stored, dict):
             raise DataError(expect(str(p), "a JSON object", type(stored).__name__, fix))
+        if self.upgrade is not None:
+            try:
+                stored = self.upgrade(stored)
+            except ConfigError as exc:
+                raise DataError(f"{p}: {exc}") from None
         check_settings(str(p), {**self.defaults, **stored}, settings, self.what, self.free)
 
     def prepare(self, settings: Mapping[str, Any]) -> None:

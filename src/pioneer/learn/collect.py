@@ -74,7 +74,7 @@ def collect_episode(
     reward: str,
     checkpoint: str | None,
     env_seed: int,
-    label_prev: str = "applied",
+    label_prev: str,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher

@@ -45,17 +45,15 @@ import math
 import typing
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal, Self
 
 import numpy as np
 import torch
-from annotated_types import Ge, Interval
 from numpy.typing import NDArray
 
-from pioneer.bounds import Positive
+from pioneer.bounds import Count, NonNegativeInt, Positive
 from pioneer.config import Config
 from pioneer.data import base_scenario
-from pioneer.deploy.mixture import ActionMode
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
 from pioneer.imitation.rounds import one_thread as _worker_init
@@ -66,9 +64,10 @@ from pioneer.learn.collect import clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.models import (
     MDN,
+    TRAIN_BATCH,
+    TRAIN_LR,
     Student,
     StudentConfig,
-    StudentKind,
     build_student,
     load_student,
     read_checkpoint_meta,
@@ -94,24 +93,29 @@ LABEL_PREV: tuple[str, ...] = typing.get_args(LabelPrev)
 class DaggerConfig(Config):
     """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
+    # hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)
     scenario: str = "hr-rl"
-    student: StudentKind = "mdn"
-    action_mode: ActionMode = "mode"  # MDN's deterministic action in rollouts and checkpoint
-    # MDN's β-NLL exponent (0 = plain NLL; see StudentConfig)
-    nll_beta: Annotated[float, Interval(ge=0.0, le=1.0)] = 0.0
+    student: StudentConfig = StudentConfig()  # the student network
     # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
     # command the robot actually ran) or "teacher" (the teacher's own previous label along the
     # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
     # labels). Equal on teacher-driven steps.
     label_prev: LabelPrev = "applied"
-    teacher_episodes: Annotated[int, Ge(1)] = 50  # round 0, driven by the teacher
-    rounds: Annotated[int, Ge(0)] = 10  # student-driven rounds after round 0
-    episodes_per_round: Annotated[int, Ge(1)] = 50
-    epochs_initial: Annotated[int, Ge(1)] = 40  # training epochs after round 0 (fresh network)
-    epochs_per_round: Annotated[int, Ge(0)] = 10  # epochs over the aggregate after each later round
-    batch: Annotated[int, Ge(1)] = 256
-    lr: Positive = 1e-3
-    seed: Annotated[int, Ge(0)] = 0
+    teacher_episodes: Count = 50  # round 0, driven by the teacher
+    rounds: NonNegativeInt = 10  # student-driven rounds after round 0
+    episodes_per_round: Count = 50  # episodes of every later round
+    epochs_initial: Count = 40  # training epochs after round 0 (fresh network)
+    epochs_per_round: NonNegativeInt = 10  # epochs over the aggregate after each later round
+    batch: Count = TRAIN_BATCH  # frames per Adam step
+    lr: Positive = TRAIN_LR  # Adam learning rate
+    seed: NonNegativeInt = 0  # seeds the networks and the DAgger episodes
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        """Build from a plain dict, also in the layout of runs and checkpoints written before
+        the student's settings were nested (``student`` its kind, ``action_mode`` and
+        ``nll_beta`` beside it)."""
+        return super().from_dict(_nest_student(data))
 
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
@@ -134,14 +138,31 @@ class DaggerResult:
 
 # ------------------------------------------------------------------------------ run folder
 def _folder(out: Path) -> RunFolder:
-    """The run's episodes, rounds' students and settings (older runs' settings files lack
-    later options: their defaults; a rerun may change the number of rounds)."""
-    return RunFolder(out, FINAL_FILE, "DAgger", defaults=DaggerConfig().to_dict(), free=("rounds",))
+    """The run's episodes, rounds' students and settings (an older run's settings file is
+    read in today's layout, options added since at their defaults; a rerun may change the
+    number of rounds)."""
+    return RunFolder(out, FINAL_FILE, "DAgger", upgrade=_current_layout, free=("rounds",))
+
+
+def _current_layout(stored: dict[str, Any]) -> dict[str, Any]:
+    """A stored DaggerConfig in today's layout (:meth:`DaggerConfig.from_dict`)."""
+    return DaggerConfig.from_dict(stored).to_dict()
 
 
 def _sizes(cfg: DaggerConfig) -> list[int]:
     """Episodes of each round."""
     return [cfg.episodes_in(r) for r in range(cfg.rounds + 1)]
+
+
+def _nest_student(data: Any) -> Any:
+    """``data`` (a DaggerConfig as a dict) in the current layout: the flat ``student`` (its
+    kind), ``action_mode`` and ``nll_beta`` of older runs moved into ``student``."""
+    if not isinstance(data, dict) or isinstance(data.get("student"), dict):
+        return data
+    flat = {"student": "kind", "action_mode": "action_mode", "nll_beta": "nll_beta"}
+    student = {new: data[old] for old, new in flat.items() if old in data}
+    rest = {k: v for k, v in data.items() if k not in flat}
+    return {**rest, "student": student} if student else rest
 
 
 def scenario_set(pattern: str) -> list[str]:
@@ -313,10 +334,7 @@ class _Students:
         cfg, rnd = self.cfg, step.round
         model = step.previous
         if model is None:
-            model = build_student(
-                StudentConfig(kind=cfg.student, action_mode=cfg.action_mode, nll_beta=cfg.nll_beta),
-                seed=cfg.seed,
-            )
+            model = build_student(cfg.student, seed=cfg.seed)
         epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
         x, y = step.data
         history: list[float] = []

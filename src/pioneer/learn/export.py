@@ -31,11 +31,19 @@ import numpy as np
 import torch
 from torch import nn
 
+from pioneer.config import default
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.deploy.runtime import ONNX_FORMAT
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path
-from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
+from pioneer.learn.models import (
+    MDN,
+    Student,
+    StudentConfig,
+    load_student,
+    select_action,
+    uncertainty,
+)
 
 __all__ = [
     "CHECKPOINT_FILE",
@@ -79,7 +87,8 @@ def export_onnx(
 
     mode = action_mode or model.config.action_mode
     if mode not in ACTION_MODES:
-        raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))
+        fix = f"use {default(StudentConfig, 'action_mode')!r}"
+        raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))
     graph: nn.Module
     if isinstance(model, MDN):
         graph, outputs = _MDNGraph(model, mode), MDN_OUTPUTS

@@ -35,16 +35,18 @@ import math
 import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+from annotated_types import Interval, MinLen
 from numpy.typing import NDArray
 from torch import nn
 
-from pioneer.config import Config, check_nonnegative
-from pioneer.deploy.mixture import ACTION_MODES, mixture_action, mixture_uncertainty
+from pioneer.bounds import Count, NonNegative, UnitInterval
+from pioneer.config import Config, default
+from pioneer.deploy.mixture import ACTION_MODES, ActionMode, mixture_action, mixture_uncertainty
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
@@ -70,6 +72,8 @@ __all__ = [
 
 ACTION_DIM = 2  # (v [m/s], ω [rad/s])
 CHECKPOINT_FORMAT = "pioneer.student/1"
+TRAIN_BATCH = 256  # frames per Adam step (paper §V-B.2)
+TRAIN_LR = 1e-3  # Adam learning rate (paper §V-B.2)
 StudentKind = Literal["mdn", "mlp"]
 KINDS: tuple[str, ...] = typing.get_args(StudentKind)
 
@@ -78,47 +82,20 @@ KINDS: tuple[str, ...] = typing.get_args(StudentKind)
 class StudentConfig(Config):
     """Architecture of a student network (defaults = paper §V-B.2)."""
 
-    kind: str = "mdn"  # "mdn" (mixture density network) | "mlp" (regression baseline)
-    obs_dim: int = OBS_DIM  # input features (29-D observation, paper §III-A)
-    hidden: tuple[int, ...] = (128, 128)  # trunk widths, ReLU after each
-    dropout: float = 0.1  # after each hidden ReLU (training only)
-    n_components: int = 10  # K, mixture components (MDN only)
-    sigma_floor: float = 1e-3  # [m/s | rad/s] added to every component std (MDN only)
-    action_mode: str = "mode"  # deterministic action: "mode" | "mean" (see module docstring)
-    nll_beta: float = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
+    kind: StudentKind = "mdn"  # "mdn" (mixture density network) or "mlp" (regression baseline)
+    obs_dim: Count = OBS_DIM  # input features (29-D observation, paper §III-A)
+    hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # trunk widths, ReLU after each
+    dropout: Annotated[float, Interval(ge=0, lt=1)] = 0.1  # after each hidden ReLU (training only)
+    n_components: Count = 10  # K, mixture components (MDN only)
+    sigma_floor: NonNegative = 1e-3  # [m/s | rad/s] added to every component std (MDN only)
+    # the MDN's deterministic action: the mean of its most probable component ("mode") or the
+    # mixture mean ("mean"); see the module docstring
+    action_mode: ActionMode = "mode"
+    nll_beta: UnitInterval = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
 
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ConfigError(
-                expect("StudentConfig.kind", f"one of {KINDS}", self.kind, "use 'mdn'")
-            )
-        if self.action_mode not in ACTION_MODES:
-            raise ConfigError(
-                expect(
-                    "StudentConfig.action_mode",
-                    f"one of {ACTION_MODES}",
-                    self.action_mode,
-                    "use 'mode'",
-                )
-            )
-        for name, value in (("obs_dim", self.obs_dim), ("n_components", self.n_components)):
-            if not (isinstance(value, int) and value >= 1):
-                raise ConfigError(
-                    expect(f"StudentConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
-                )
-        if not (len(self.hidden) >= 1 and all(isinstance(h, int) and h >= 1 for h in self.hidden)):
-            raise ConfigError(
-                expect("StudentConfig.hidden", "one or more widths >= 1", self.hidden, "(128, 128)")
-            )
-        if not (isinstance(self.dropout, int | float) and 0.0 <= self.dropout < 1.0):
-            raise ConfigError(
-                expect("StudentConfig.dropout", "a number in [0, 1)", self.dropout, "use 0.1")
-            )
-        check_nonnegative("StudentConfig", "sigma_floor", self.sigma_floor)
-        if not (isinstance(self.nll_beta, int | float) and 0.0 <= self.nll_beta <= 1.0):
-            raise ConfigError(
-                expect("StudentConfig.nll_beta", "a number in [0, 1]", self.nll_beta, "use 0.5")
-            )
+
+# The StudentConfig fields only an MDN uses (an MLP ignores them).
+MDN_ONLY: tuple[str, ...] = ("n_components", "sigma_floor", "action_mode", "nll_beta")
 
 
 # ---------------------------------------------------------------------------------- read-outs
@@ -148,7 +125,8 @@ def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") ->
         return mu.gather(1, idx).squeeze(1)
     if mode == "mean":
         return (torch.softmax(logits, dim=-1).unsqueeze(-1) * mu).sum(dim=-2)
-    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, "use 'mode'"))
+    fix = f"use {default(select_action, 'mode')!r}"
+    raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))
 
 
 # ---------------------------------------------------------------------------------- networks
@@ -325,8 +303,8 @@ def train_student(
     obs: NDArray[np.floating] | torch.Tensor,
     actions: NDArray[np.floating] | torch.Tensor,
     epochs: int = 50,
-    batch: int = 256,
-    lr: float = 1e-3,
+    batch: int = TRAIN_BATCH,
+    lr: float = TRAIN_LR,
     seed: int = 0,
     progress: Callable[[int, float], None] | None = None,
     fit_normalizer: bool = True,
@@ -351,7 +329,7 @@ def train_student(
         if not (isinstance(value, int) and value >= 1):
             raise ConfigError(expect(name, "an integer >= 1", value, f"set {name} >= 1"))
     if not (math.isfinite(lr) and lr > 0):
-        raise ConfigError(expect("lr", "a finite number > 0", lr, "use 1e-3"))
+        raise ConfigError(expect("lr", "a finite number > 0", lr, f"use {TRAIN_LR:g}"))
     if fit_normalizer:
         model.set_normalizer(x, y)
     n = x.shape[0]

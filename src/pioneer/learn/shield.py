@@ -26,6 +26,7 @@ from annotated_types import Interval
 from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative
+from pioneer.config import default
 from pioneer.control.registry import build_policy
 from pioneer.envs.policy import Planner, Policy
 from pioneer.errors import ConfigError, expect
@@ -52,9 +53,11 @@ class ShieldPolicy:
         name: str = "student-shield",
     ) -> None:
         if signal not in SIGNALS:
-            raise ConfigError(expect("shield signal", f"one of {SIGNALS}", signal, "aleatoric"))
+            fix = f"use {default(ShieldPolicy, 'signal')}"
+            raise ConfigError(expect("shield signal", f"one of {SIGNALS}", signal, fix))
         if mode not in MODES:
-            raise ConfigError(expect("shield mode", f"one of {MODES}", mode, "use handover"))
+            fix = f"use {default(ShieldPolicy, 'mode')}"
+            raise ConfigError(expect("shield mode", f"one of {MODES}", mode, fix))
         if mode == "handover" and fallback is None:
             raise ConfigError(
                 expect("shield fallback", "a policy for handover", None, "pass fallback=teacher")
@@ -62,7 +65,8 @@ class ShieldPolicy:
         if not (threshold >= 0.0 and np.isfinite(threshold)):
             raise ConfigError(expect("shield threshold", "a finite number >= 0", threshold, "0.1"))
         if not 0.0 <= slow_factor <= 1.0:
-            raise ConfigError(expect("slow_factor", "in [0, 1]", slow_factor, "use 0.3"))
+            fix = f"use {default(ShieldPolicy, 'slow_factor')}"
+            raise ConfigError(expect("slow_factor", "in [0, 1]", slow_factor, fix))
         self.student = student
         self.fallback = fallback
         self.threshold = float(threshold)

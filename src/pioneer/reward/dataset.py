@@ -22,13 +22,12 @@ from numpy.typing import NDArray
 
 from pioneer.errors import DataError, expect
 from pioneer.io import atomic_path, load_npz
-from pioneer.laser import mirror_observation, wrap_angles
+from pioneer.laser import OBS_DIM, mirror_observation, wrap_angles
 from pioneer.sim.lidar import observation_names
 
 __all__ = ["FORMAT", "OBS_DIM", "UNITS", "Dataset"]
 
 FORMAT = "pioneer.demos/1"
-OBS_DIM = 29
 UNITS = {
     "time": "s",
     "obs": "m (ranges r_k, d_i) and rad (angles phi_i, phi_goal)",

@@ -49,10 +49,12 @@ MIRROR_OF = {"hr-rl": "hl-rr", "hl-rr": "hr-rl"}
 class RewardRecipe(Config):
     """Every choice from demonstrations to a fitted density reward."""
 
-    gamma: Literal["labels", "graded"] = "labels"  # ±1 labels, or graded (reward.grading)
+    # the demos' ±1 labels, or γ graded by each episode's quality (time, margin, smoothness;
+    # pioneer.reward.grading)
+    gamma: Literal["labels", "graded"] = "labels"
     mirror: bool = False  # add the mirror scenario's demonstrations, mirrored
-    features: FeatureName | None = None  # None: by scenario
-    density: DensityConfig = DensityConfig()
+    features: FeatureName | None = None  # the feature map (None: by scenario)
+    density: DensityConfig = DensityConfig()  # the density model's hyperparameters
 
 
 # Chosen on validation seeds (docs/reward.md, "Settings chosen on validation seeds"): the

@@ -57,12 +57,14 @@ class DensityConfig(Config):
     """Hyperparameters of the density reward (defaults: docs/reward.md)."""
 
     gain2: Positive = 1.0  # g², kernel output scale
-    length_scale: Positive | None = None  # l in standardised units; None → heuristic below
-    length_scale_factor: Positive = 1.0  # multiplies the heuristic (median pairwise distance)
+    # l in standardised units; None: the median heuristic (median pairwise distance)
+    length_scale: Positive | None = None
+    length_scale_factor: Positive = 1.0  # multiplies the median-heuristic length scale
     lam: Positive = 1e-2  # λ, weight of the RKHS-norm regulariser
     beta: Positive = 1e-3  # β, weight of the coefficient-norm regulariser
-    max_inducing: Annotated[int, Ge(1)] = 2000  # more demos: choose a subset as inducing points
-    inducing: Inducing = "kmeans"  # "kmeans" (medoids) or "fps" (farthest-point sampling)
+    max_inducing: Annotated[int, Ge(1)] = 2000  # above this many demos, choose inducing points
+    # how the inducing points are chosen: "kmeans" (medoids) or "fps" (farthest-point sampling)
+    inducing: Inducing = "kmeans"
     jitter: Positive = 1e-8  # first diagonal jitter tried if the Cholesky factorisation fails
     standardize: bool = True  # z-score features with the training statistics
     seed: int = 0  # for k-means / FPS / the length-scale subsample

@@ -20,12 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.config import Config
+from pioneer.laser import LidarConfig
 
 __all__ = ["RuleWeights", "adaptive_weights", "combine", "goal_term", "obstacle_term"]
 
 F64 = NDArray[np.float64]
 
-D1_INDEX = 24  # observation index of d_1 (then d_2), paper eq. 2
+D1_INDEX = LidarConfig().n_sectors  # observation index of d_1 (then d_2), paper eq. 2: 24
 
 
 def goal_term(d_goal: F64, d_total: F64 | float) -> F64:
@@ -33,7 +34,7 @@ def goal_term(d_goal: F64, d_total: F64 | float) -> F64:
     return 1.0 - np.tanh(np.asarray(d_goal) / np.maximum(d_total, 1e-9))
 
 
-def obstacle_term(obs_rollout: NDArray[np.floating], n_nearest: int = 2) -> F64:
+def obstacle_term(obs_rollout: NDArray[np.floating], n_nearest: int = LidarConfig.n_nearest) -> F64:
     """R_obs = tanh(mean_ℓ min_i d_ℓ,i) for observation rollouts ``(C, L, 29)``."""
     d = np.asarray(obs_rollout)[..., D1_INDEX : D1_INDEX + n_nearest].min(axis=-1)
     return np.tanh(d.mean(axis=-1).astype(np.float64))

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.bounds import Positive
 from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE, SocialForceConfig
@@ -51,17 +52,12 @@ F64 = NDArray[np.float64]
 class SimConfig(Config):
     """Timing, termination and the sub-models' parameters."""
 
-    dt: float = 0.1  # [s] control period Δt_ctrl (10 Hz)
-    time_limit: float = 30.0  # [s] episode length before truncation
-    goal_tolerance: float = 0.3  # [m] success when ‖p_r − goal‖ < this
+    dt: Positive = 0.1  # [s] control period Δt_ctrl (10 Hz)
+    time_limit: Positive = 30.0  # [s] episode length before truncation
+    goal_tolerance: Positive = 0.3  # [m] success when ‖p_r − goal‖ < this
     robot: RobotConfig = RobotConfig()
     social_force: SocialForceConfig = SocialForceConfig()
     lidar: LidarConfig = LidarConfig()
-
-    def __post_init__(self) -> None:
-        check_positive("SimConfig", "dt", self.dt)
-        check_positive("SimConfig", "time_limit", self.time_limit)
-        check_positive("SimConfig", "goal_tolerance", self.goal_tolerance)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -58,9 +58,10 @@ import dataclasses
 import functools
 import math
 import time
+import typing
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -74,7 +75,8 @@ from pioneer.baselines.crowdnav.network import (
     read_crowdnav_meta,
     save_crowdnav,
 )
-from pioneer.config import Config, check_positive
+from pioneer.bounds import Count, NonNegativeInt, Positive
+from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Fitted, Step, one_thread, run_rounds
 from pioneer.imitation.store import RunFolder, check_settings
@@ -93,44 +95,27 @@ __all__ = [
 DATA_DIR = "imitation"
 ROUND_POLICY_FILE = "policy.safetensors"
 POLICY_FILE = "bc_policy.safetensors"
-EXPERTS = ("sfm", "dwa", "teacher")
+# The demonstrators: "sfm", "dwa" (both independent of PioneeR) or PioneeR's "teacher".
+Expert = Literal["sfm", "dwa", "teacher"]
+EXPERTS: tuple[str, ...] = typing.get_args(Expert)
 
 
 @dataclasses.dataclass(frozen=True)
 class WarmStartConfig(Config):
     """Imitation warm start and critic warm-up (all off by default: pure PPO)."""
 
-    expert: str = "sfm"  # the demonstrator: "sfm" | "dwa" (independent of PioneeR) | "teacher"
-    bc_episodes: int = 0  # expert-driven demonstration episodes (0: no imitation)
-    bc_epochs: int = 30  # passes over the dataset per cloning
-    bc_batch: int = 16  # episodes per minibatch
-    bc_lr: float = 1e-3  # Adam learning rate of the cloning
-    dagger_rounds: int = 0  # rounds of policy-driven, teacher-labelled episodes
-    dagger_episodes: int = 20  # episodes per DAgger round
-    min_std: float = 0.1  # floor of σ (unit action box) after cloning
-    critic_warmup: int = 0  # [updates] PPO updates training only the critic head
-    critic_lr: float = 1e-3  # Adam learning rate of the critic warm-up
+    expert: Expert = "sfm"  # the demonstrator: sfm, dwa (independent of PioneeR) or teacher
+    bc_episodes: NonNegativeInt = 0  # expert-driven demonstration episodes (0: no imitation)
+    bc_epochs: Count = 30  # passes over the dataset per cloning
+    bc_batch: Count = 16  # episodes per minibatch
+    bc_lr: Positive = 1e-3  # Adam learning rate of the cloning
+    dagger_rounds: NonNegativeInt = 0  # rounds of policy-driven, teacher-labelled episodes
+    dagger_episodes: Count = 20  # episodes per DAgger round
+    min_std: Positive = 0.1  # floor of σ (unit action box) after cloning
+    critic_warmup: NonNegativeInt = 0  # [updates] PPO updates training only the critic head
+    critic_lr: Positive = 1e-3  # Adam learning rate of the critic warm-up
 
     def __post_init__(self) -> None:
-        for name, low in (
-            ("bc_episodes", 0),
-            ("bc_epochs", 1),
-            ("bc_batch", 1),
-            ("dagger_rounds", 0),
-            ("dagger_episodes", 1),
-            ("critic_warmup", 0),
-        ):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= low):
-                raise ConfigError(
-                    expect(f"WarmStartConfig.{name}", f"an integer >= {low}", value, f"{low}")
-                )
-        for name in ("bc_lr", "min_std", "critic_lr"):
-            check_positive("WarmStartConfig", name, getattr(self, name))
-        if self.expert not in EXPERTS:
-            raise ConfigError(
-                expect("WarmStartConfig.expert", f"one of {EXPERTS}", self.expert, "use sfm")
-            )
         if self.dagger_rounds and not self.bc_episodes:
             raise ConfigError(
                 expect(

@@ -7,15 +7,16 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import torch
+from annotated_types import Lt
 from numpy.typing import NDArray
 from torch import nn
 
-from pioneer.config import Config, check_positive
-from pioneer.errors import ConfigError, expect
+from pioneer.bounds import Count, Finite, Positive
+from pioneer.config import Config
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
 
@@ -34,44 +35,24 @@ CHECKPOINT_FORMAT = "pioneer.crowdnav/1"
 ROBOT_DIM = 8  # [p_x, p_y, r, g_x − p_x, g_y − p_y, v_pref, cos θ, sin θ]
 TEMPORAL_DIM = 2  # [v, ω]
 F32 = NDArray[np.float32]
+DeltaRange = tuple[Annotated[float, Lt(0)], Positive]  # (low, high) of a change: low < 0 < high
 
 
 @dataclasses.dataclass(frozen=True)
 class CrowdNavConfig(Config):
     """Observation, network and action parameters of CrowdNav++ (defaults: see module doc)."""
 
-    max_humans: int = 5  # N_max, spatial-edge slots (nearest kept); training sets the scenario's N
-    n_pred: int = 5  # K, predicted positions per human
-    pred_dt: float = 0.25  # [s] Δt_pred between predicted positions (the original's step)
-    sensor_range: float = 5.0  # [m] humans farther from the robot's centre are masked
-    embed: int = 64  # E, node/edge embedding width
-    hidden: int = 64  # H, GRU state width
-    head_hidden: int = 64  # hidden units of the actor and critic MLPs
-    dv_range: tuple[float, float] = (-0.1, 0.087)  # [m/s] Δv per step (original)
-    dtheta_range: tuple[float, float] = (-0.06, 0.06)  # [rad] Δθ per step (original)
-    log_std_init: float = -0.5  # initial log σ of the Gaussian (unit action box)
-
-    def __post_init__(self) -> None:
-        for name in ("max_humans", "n_pred", "embed", "hidden", "head_hidden"):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 1):
-                raise ConfigError(
-                    expect(f"CrowdNavConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
-                )
-        check_positive("CrowdNavConfig", "pred_dt", self.pred_dt)
-        check_positive("CrowdNavConfig", "sensor_range", self.sensor_range)
-        for name in ("dv_range", "dtheta_range"):
-            lo, hi = getattr(self, name)
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo < 0.0 < hi):
-                raise ConfigError(
-                    expect(
-                        f"CrowdNavConfig.{name}", "(low < 0 < high)", (lo, hi), "e.g. (-0.1, 0.1)"
-                    )
-                )
-        if not math.isfinite(self.log_std_init):
-            raise ConfigError(
-                expect("CrowdNavConfig.log_std_init", "a finite number", self.log_std_init, "-0.5")
-            )
+    # N_max, spatial-edge slots (nearest kept); training sets the scenario's N
+    max_humans: Count = 5
+    n_pred: Count = 5  # K, predicted positions per human
+    pred_dt: Positive = 0.25  # [s] Δt_pred between predicted positions (the original's step)
+    sensor_range: Positive = 5.0  # [m] humans farther from the robot's centre are masked
+    embed: Count = 64  # E, node/edge embedding width
+    hidden: Count = 64  # H, GRU state width
+    head_hidden: Count = 64  # hidden units of the actor and critic MLPs
+    dv_range: DeltaRange = (-0.1, 0.087)  # [m/s] Δv per step (original)
+    dtheta_range: DeltaRange = (-0.06, 0.06)  # [rad] Δθ per step (original)
+    log_std_init: Finite = -0.5  # initial log σ of the Gaussian (unit action box)
 
     @property
     def spatial_dim(self) -> int:

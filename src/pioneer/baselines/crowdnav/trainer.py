@@ -21,7 +21,8 @@ from pioneer.baselines.crowdnav.observation import (
     build_observation,
     command_from_action,
 )
-from pioneer.config import Config, check_nonnegative, check_positive
+from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
+from pioneer.config import Config
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import atomic_path
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
@@ -49,38 +50,24 @@ F64 = NDArray[np.float64]
 class PPOConfig(Config):
     """PPO settings (the original's, except ``lr``; see the module docstring)."""
 
-    total_steps: int = 2_000_000  # env steps (all environments together)
-    n_envs: int = 16  # environments stepped together
-    rollout: int = 30  # steps per environment per update
-    lr: float = 3e-4  # Adam learning rate (original: 4e-5 for 20 M steps)
-    gamma: float = 0.996  # discount per 0.1 s step (the original's 0.99 per 0.25 s step)
-    gae_lambda: float = 0.98  # GAE λ per 0.1 s step (the original's 0.95 per 0.25 s step)
-    clip: float = 0.2  # PPO ratio clip
-    epochs: int = 5  # passes over each rollout
-    minibatches: int = 2  # per epoch (split over environments)
-    value_coef: float = 0.5  # value-loss weight
-    entropy_coef: float = 0.01  # entropy bonus (original: 0; see the module docstring)
-    max_grad_norm: float = 0.5  # gradient clipping (global L2 norm)
-    adam_eps: float = 1e-5  # Adam ε
-    seed: int = 0  # seeds the weights, the action noise, the minibatches and the episodes
-    checkpoint_every: int = 50  # [updates] between checkpoints
-    window: int = 100  # finished episodes in the learning curve's running statistics
+    total_steps: Count = 2_000_000  # env steps (all environments together)
+    n_envs: Count = 16  # environments stepped together
+    rollout: Count = 30  # steps per environment per update
+    lr: Positive = 3e-4  # Adam learning rate (original: 4e-5 for 20 M steps)
+    gamma: UnitInterval = 0.996  # discount per 0.1 s step (the original's 0.99 per 0.25 s step)
+    gae_lambda: UnitInterval = 0.98  # GAE λ per 0.1 s step (the original's 0.95 per 0.25 s)
+    clip: Positive = 0.2  # PPO ratio clip
+    epochs: Count = 5  # passes over each rollout
+    minibatches: Count = 2  # per epoch (split over environments)
+    value_coef: NonNegative = 0.5  # value-loss weight
+    entropy_coef: NonNegative = 0.01  # entropy bonus (original: 0; see baselines.crowdnav.ppo)
+    max_grad_norm: Positive = 0.5  # gradient clipping (global L2 norm)
+    adam_eps: Positive = 1e-5  # Adam ε
+    seed: NonNegativeInt = 0  # seeds the weights, the action noise, the minibatches, the episodes
+    checkpoint_every: Count = 50  # [updates] between checkpoints
+    window: Count = 100  # finished episodes in the learning curve's running statistics
 
     def __post_init__(self) -> None:
-        for name in (
-            "total_steps",
-            "n_envs",
-            "rollout",
-            "epochs",
-            "minibatches",
-            "checkpoint_every",
-            "window",
-        ):
-            value = getattr(self, name)
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                raise ConfigError(
-                    expect(f"PPOConfig.{name}", "an integer >= 1", value, f"set {name} >= 1")
-                )
         if self.minibatches > self.n_envs:
             raise ConfigError(
                 expect(
@@ -90,16 +77,6 @@ class PPOConfig(Config):
                     "use more environments or fewer minibatches",
                 )
             )
-        for name in ("lr", "clip", "max_grad_norm", "adam_eps"):
-            check_positive("PPOConfig", name, getattr(self, name))
-        for name in ("value_coef", "entropy_coef"):
-            check_nonnegative("PPOConfig", name, getattr(self, name))
-        for name in ("gamma", "gae_lambda"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
-                raise ConfigError(expect(f"PPOConfig.{name}", "in [0, 1]", value, "use 0.99/0.95"))
-        if not (isinstance(self.seed, int) and self.seed >= 0):
-            raise ConfigError(expect("PPOConfig.seed", "an integer >= 0", self.seed, "use 0"))
 
     @property
     def steps_per_update(self) -> int:

@@ -8,6 +8,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.baselines.cvar_bf.config import CvarBfConfig
+
 __all__ = [
     "cvar_lower",
     "cvar_weights",
@@ -39,9 +41,9 @@ def dynamic_zone_barrier(
     p_o: F64,
     v_o: F64,
     radius: F64 | float,
-    rho: float = 10.0,
-    v_hat: float = 1.0,
-    eps_vel: float = 0.05,
+    rho: float = CvarBfConfig.rho,
+    v_hat: float = CvarBfConfig.v_hat,
+    eps_vel: float = CvarBfConfig.eps_vel,
     grad: bool = False,
 ) -> tuple[F64, F64, F64]:
     """Dynamic-zone barrier h [m²] and its gradients w.r.t. the robot point and velocity.

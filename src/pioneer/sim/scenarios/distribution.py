@@ -15,60 +15,48 @@ bodies for the start seeds a scenario file is checked with is redrawn, and count
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Annotated, Any, cast
 
 import numpy as np
+from annotated_types import MinLen
 
-from pioneer.config import Config
+from pioneer.bounds import NonNegative, NonNegativeInt, UnitInterval
+from pioneer.config import Config, Ordered
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
 from pioneer.io import check_name
-from pioneer.sim.scenarios.layouts import ElevatorLayout, elevator_scenario
+from pioneer.sim.scenarios.layouts import ElevatorLayout, HumanSide, elevator_scenario
 from pioneer.sim.scenarios.registry import check_placement
 from pioneer.sim.world import SimConfig
 
 __all__ = ["LayoutDistribution", "sample_layout", "sample_variants"]
 
-Range = tuple[float, float]
-PAPER_LOBBY = 4.0  # [m] the paper world's lobby width and depth, the proportions' reference
+Range = Annotated[tuple[NonNegative, NonNegative], Ordered()]  # 0 <= low <= high
+Counts = Annotated[tuple[NonNegativeInt, NonNegativeInt], Ordered()]  # 0 <= low <= high, inclusive
+PAPER = ElevatorLayout()  # the paper world: the reference of the proportions
 MAX_DRAWS = 50  # draws per accepted layout before giving up
+QUEUE_FRONT_Y = -2.7  # [m] the front of the boarders' start rows when three or more queue
 
 
 @dataclasses.dataclass(frozen=True)
 class LayoutDistribution(Config):
     """Uniform ranges of the randomised elevator world (the paper world is inside every one)."""
 
+    error_type = ScenarioError
+
     lobby_width: Range = (3.5, 5.0)  # [m]
     lobby_depth: Range = (3.5, 5.0)  # [m]
     cabin_width: Range = (2.2, 2.8)  # [m]
     cabin_depth: Range = (2.3, 3.0)  # [m]
     door_width: Range = (1.4, 2.2)  # [m] (capped by the cabin width)
-    n_boarding: tuple[int, int] = (1, 3)  # humans boarding from the lobby, inclusive
-    n_exiting: tuple[int, int] = (0, 2)  # humans leaving the cabin, inclusive
+    n_boarding: Counts = (1, 3)  # humans boarding from the lobby
+    n_exiting: Counts = (0, 2)  # humans leaving the cabin
     human_radius: Range = (0.3, 0.6)  # [m]
     v_pref_scale: Range = (0.8, 1.3)  # × the paper's (0.5, 0.6, 0.7) m/s
     a_robot: Range = (0.0, 2.0)  # [m/s²] the humans' reaction to the robot (0: invisible)
-    reacts_share: float = 0.8  # probability that a group (boarders, exiting) reacts at all
+    reacts_share: UnitInterval = 0.8  # probability that a group (boarders, exiting) reacts at all
     lidar_noise: Range = (0.0, 0.03)  # [m] Gaussian range noise σ
-    sides: tuple[str, ...] = ("right", "left")  # "right" → HR-RL, "left" → HL-RR
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if f.name in ("reacts_share", "sides"):
-                continue
-            lo, hi = value
-            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
-                raise ScenarioError(
-                    expect(f"LayoutDistribution.{f.name}", "0 <= low <= high", value, "fix it")
-                )
-        if not 0.0 <= self.reacts_share <= 1.0:
-            raise ScenarioError(
-                expect("LayoutDistribution.reacts_share", "in [0, 1]", self.reacts_share, "0.8")
-            )
-        if not self.sides or set(self.sides) - {"right", "left"}:
-            raise ScenarioError(
-                expect("LayoutDistribution.sides", "'right' and/or 'left'", self.sides, "fix it")
-            )
+    # the humans' sides to draw from: "right" → HR-RL, "left" → HL-RR
+    sides: Annotated[tuple[HumanSide, ...], MinLen(1)] = ("right", "left")
 
 
 def sample_layout(
@@ -84,11 +72,15 @@ def sample_layout(
 
     w, d = u(dist.lobby_width), u(dist.lobby_depth)
     cabin_w = min(u(dist.cabin_width), w)
-    sw, sd = w / PAPER_LOBBY, d / PAPER_LOBBY  # the paper world's proportions
+    sw, sd = w / PAPER.lobby_width, d / PAPER.lobby_depth  # the paper world's proportions
     n_boarding = k(dist.n_boarding)
     scale = u(dist.v_pref_scale)
+    boarder_y = _scaled(PAPER.boarder_y, sd)
+    if n_boarding >= 3:  # they queue in depth: give them the whole back of the lobby
+        boarder_y = (boarder_y[0], round(QUEUE_FRONT_Y * sd, 3))
+    exit_turn = _scaled(PAPER.exit_waypoints[0] if PAPER.exit_waypoints else None, sw, sd)
     layout = ElevatorLayout(
-        human_side=str(rng.choice(list(dist.sides))),
+        human_side=cast(HumanSide, str(rng.choice(list(dist.sides)))),
         cabin_width=cabin_w,
         cabin_depth=u(dist.cabin_depth),
         door_width=min(u(dist.door_width), cabin_w),
@@ -97,12 +89,11 @@ def sample_layout(
         n_boarding=n_boarding,
         n_exiting=k(dist.n_exiting),
         human_radius=u(dist.human_radius),
-        v_pref_choices=tuple(round(v * scale, 3) for v in (0.5, 0.6, 0.7)),
-        robot_start_y=(round(-2.4 * sd, 3), round(-2.0 * sd, 3)),
-        boarder_x=(round(1.2 * sw, 3), round(1.3 * sw, 3)),
-        # three or more boarders queue in depth: give them the whole back of the lobby
-        boarder_y=(round(-3.8 * sd, 3), round((-3.3 if n_boarding < 3 else -2.7) * sd, 3)),
-        exit_waypoints=((round(1.2 * sw, 3), round(-1.6 * sd, 3)),),
+        v_pref_choices=tuple(round(v * scale, 3) for v in PAPER.v_pref_choices),
+        robot_start_y=_scaled(PAPER.robot_start_y, sd),
+        boarder_x=_scaled(PAPER.boarder_x, sw),
+        boarder_y=boarder_y,
+        exit_waypoints=(exit_turn,),
         boarders_react_to_robot=bool(rng.random() < dist.reacts_share),
         exiting_react_to_robot=bool(rng.random() < dist.reacts_share),
     )
@@ -113,6 +104,16 @@ def sample_layout(
         lidar=dataclasses.replace(base.lidar, noise_std=u(dist.lidar_noise)),
     )
     return layout, sim
+
+
+def _scaled(
+    pair: tuple[float, float] | None, s0: float, s1: float | None = None
+) -> tuple[float, float]:
+    """A pair of the paper world (a range or a point) scaled by ``s0`` (the second item by
+    ``s1``, default ``s0``), rounded to the millimetre."""
+    if pair is None:
+        raise ValueError("the paper world sets every range it scales")  # pragma: no cover
+    return round(pair[0] * s0, 3), round(pair[1] * (s0 if s1 is None else s1), 3)
 
 
 def _changed(cfg: Config, default: Config) -> dict[str, Any]:

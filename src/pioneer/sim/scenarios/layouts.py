@@ -5,14 +5,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Annotated, Literal
 
-from pioneer.config import Config, check_nonnegative, check_positive, check_range
+from annotated_types import Interval
+
+from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, Span
+from pioneer.config import Config
 from pioneer.errors import ScenarioError, expect
 from pioneer.sim.scenarios.spec import HumanSpec, Point, Region, ScenarioConfig, Segment
 from pioneer.sim.world import SimConfig
 
 # --------------------------------------------------------------------------------------------
 # Elevator co-boarding
+
+HumanSide = Literal["right", "left"]  # the humans' side: "right" → HR-RL, "left" → HL-RR
 
 
 @dataclasses.dataclass(frozen=True)
@@ -27,44 +33,46 @@ class ElevatorLayout(Config):
     The values of the free fields were chosen by world statistics (docs/calibration.md).
     """
 
-    human_side: str = "right"  # "right" → HR-RL (robot goal left); "left" → HL-RR
-    cabin_width: float = 2.5  # [m] Schindler 6000
-    cabin_depth: float = 2.7  # [m]
-    door_width: float = 1.8  # [m]
-    lobby_width: float = 4.0  # [m] walled on its left and right
-    lobby_depth: float = 4.0  # [m] the far side (y = −lobby_depth) is open
-    n_boarding: int = 2  # humans boarding from the lobby (alternating sides of the robot)
-    n_exiting: int = 1  # humans leaving the cabin through the door
-    human_radius: float = 0.6  # [m] the paper's value
+    error_type = ScenarioError
+
+    human_side: HumanSide = "right"  # "right" → HR-RL (robot goal left); "left" → HL-RR
+    cabin_width: Positive = 2.5  # [m] Schindler 6000
+    cabin_depth: Positive = 2.7  # [m]
+    door_width: Positive = 1.8  # [m]
+    lobby_width: Positive = 4.0  # [m] walled on its left and right
+    lobby_depth: Positive = 4.0  # [m] the far side (y = −lobby_depth) is open
+    n_boarding: NonNegativeInt = 2  # humans boarding from the lobby, on alternating sides
+    n_exiting: NonNegativeInt = 1  # humans leaving the cabin through the door
+    human_radius: Positive = 0.6  # [m] the paper's value
     v_pref_choices: tuple[float, ...] = (0.5, 0.6, 0.7)  # [m/s]
-    robot_start_half_width: float = 0.25  # [m] robot start x ∈ ±this
-    robot_start_y: tuple[float, float] | None = (-2.4, -2.0)  # [m] None: compact rule
-    boarder_x: tuple[float, float] | None = (1.2, 1.3)  # [m] |x| of a boarder's start
-    boarder_y: tuple[float, float] | None = (-3.8, -3.3)  # [m] beside, behind the robot
-    boarding_delay: tuple[float, float] = (0.5, 1.5)  # [s] boarders' reaction time
+    robot_start_half_width: NonNegative = 0.25  # [m] robot start x ∈ ±this
+    robot_start_y: Span | None = (-2.4, -2.0)  # [m] None: compact rule
+    boarder_x: Span | None = (1.2, 1.3)  # [m] |x| of a boarder's start
+    boarder_y: Span | None = (-3.8, -3.3)  # [m] beside, behind the robot
+    boarding_delay: Span = (0.5, 1.5)  # [s] boarders' reaction time
     # The first boarder starts on the robot's goal side, the next on the humans' side, … (so
     # HL-RR is the mirror image of HR-RL); False: the first on the right in both (compact).
     first_boarder_on_goal_side: bool = True
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
-    exit_start_x: tuple[float, float] = (-0.5, 0.5)  # [m] exiting passengers start in the cabin
-    exit_start_y: tuple[float, float] | None = None  # [m] None: r_h + 0.3 … r_h + 0.9 (≤ depth)
+    exit_start_x: Span = (-0.5, 0.5)  # [m] exiting passengers start in the cabin
+    exit_start_y: Span | None = None  # [m] None: r_h + 0.3 … r_h + 0.9 (≤ depth)
     # After the door, the exiting passenger turns aside through these points (HR-RL: to the
     # humans' side, ahead of the robot), then leaves through the open far side below the last
     # one. None: straight out (compact rule).
     exit_waypoints: tuple[Point, ...] | None = ((1.2, -1.6),)  # [m]
     # Boarders go once the exiting passenger heads for this waypoint index (1 = the one in
     # front of the door, 2 = the first after it, …); None: once it has left the map.
-    exit_release_waypoint: int | None = 2
+    exit_release_waypoint: Count | None = 2
     # A later boarder goes once the one before it heads for this waypoint index (1 = in front
     # of the door, 2 = just inside the cabin, 3 = its spot); None: once it has arrived.
-    boarder_release_waypoint: int | None = 1
+    boarder_release_waypoint: Annotated[int, Interval(ge=1, le=2)] | None = 1
     boarders_react_to_robot: bool = True  # False: the robot is invisible to the boarders
     exiting_react_to_robot: bool = True  # False: … to the exiting passengers
-    margin: float = 0.05  # [m] extra clearance from walls for sampled positions
-    min_start_gap: float = 0.1  # [m] clearance between all bodies and walls at t = 0
+    margin: NonNegative = 0.05  # [m] extra clearance from walls for sampled positions
+    min_start_gap: NonNegative = 0.1  # [m] clearance between all bodies and walls at t = 0
 
     @classmethod
-    def compact(cls, human_side: str = "right") -> ElevatorLayout:
+    def compact(cls, human_side: HumanSide = "right") -> ElevatorLayout:
         """The earlier default world: the 4 × 4 m map contains the cabin (1.3 m lobby)."""
         return cls(
             human_side=human_side,
@@ -80,23 +88,6 @@ class ElevatorLayout(Config):
         )
 
     def __post_init__(self) -> None:
-        for name in ("cabin_width", "cabin_depth", "door_width", "lobby_width", "lobby_depth"):
-            check_positive("ElevatorLayout", name, getattr(self, name))
-        check_positive("ElevatorLayout", "human_radius", self.human_radius)
-        check_nonnegative("ElevatorLayout", "margin", self.margin)
-        check_nonnegative("ElevatorLayout", "min_start_gap", self.min_start_gap)
-        check_nonnegative("ElevatorLayout", "robot_start_half_width", self.robot_start_half_width)
-        check_range("ElevatorLayout", "boarding_delay", *self.boarding_delay)
-        for name in ("robot_start_y", "boarder_x", "boarder_y", "exit_start_x", "exit_start_y"):
-            value = getattr(self, name)
-            if value is not None:
-                check_range("ElevatorLayout", name, *value)
-        if self.human_side not in ("right", "left"):
-            raise ScenarioError(
-                expect(
-                    "ElevatorLayout.human_side", "'right' or 'left'", self.human_side, "use 'right'"
-                )
-            )
         if self.door_width > self.cabin_width:
             raise ScenarioError(
                 expect(
@@ -115,26 +106,17 @@ class ElevatorLayout(Config):
                     "widen the lobby",
                 )
             )
-        for name in ("n_boarding", "n_exiting"):
-            n = getattr(self, name)
-            if not isinstance(n, int) or n < 0:
-                raise ScenarioError(
-                    expect(
-                        f"ElevatorLayout.{name}", "an integer >= 0", n, f"set {name} to 0 or more"
-                    )
+        n_route = 2 + len(self.exit_waypoints or ())  # the two at the door, then the exit
+        k = self.exit_release_waypoint
+        if k is not None and k > n_route:
+            raise ScenarioError(
+                expect(
+                    "ElevatorLayout.exit_release_waypoint",
+                    f"null or an integer in 1..{n_route} (waypoints of the route)",
+                    k,
+                    "fix it",
                 )
-        n_route = 2 + len(self.exit_waypoints or ())
-        for name, n_max in (("exit_release_waypoint", n_route), ("boarder_release_waypoint", 2)):
-            k = getattr(self, name)
-            if k is not None and not (isinstance(k, int) and 1 <= k <= n_max):
-                raise ScenarioError(
-                    expect(
-                        f"ElevatorLayout.{name}",
-                        f"null or an integer in 1..{n_max} (waypoints of the route)",
-                        k,
-                        "fix it",
-                    )
-                )
+            )
 
 
 def _elevator_walls(lay: ElevatorLayout) -> tuple[Segment, ...]:
@@ -286,19 +268,16 @@ def elevator_scenario(
 class StaticStudyLayout(Config):
     """A room with one static human in the middle and corridors to its left and right."""
 
-    width: float = 4.0  # [m] room x ∈ [−width/2, width/2]
-    length: float = 6.0  # [m] room y ∈ [−length/2, length/2]
-    human_radius: float = 0.6  # [m]
+    error_type = ScenarioError
+
+    width: Positive = 4.0  # [m] room x ∈ [−width/2, width/2]
+    length: Positive = 6.0  # [m] room y ∈ [−length/2, length/2]
+    human_radius: Positive = 0.6  # [m]
     start_y: float = -2.4  # [m] robot start row (below the human)
     goal_y: float = 2.4  # [m] robot goal row (above the human)
     start_half_width: float = 0.3  # [m] start x ∈ ±this
     human_x: float = 0.0  # [m] the static human's position
     human_y: float = 0.0  # [m]
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            if f.name not in ("start_y", "goal_y", "start_half_width", "human_x", "human_y"):
-                check_positive("StaticStudyLayout", f.name, getattr(self, f.name))
 
 
 def static_study_scenario(

@@ -18,6 +18,7 @@ from pioneer.laser import LidarConfig
 from pioneer.sim.humans import SocialForceConfig
 from pioneer.sim.scenarios.layouts import (
     ElevatorLayout,
+    HumanSide,
     StaticStudyLayout,
     elevator_scenario,
     static_study_scenario,
@@ -30,7 +31,7 @@ from pioneer.sim.world import SimConfig
 # Registry and sampling
 
 
-def _compact(side: str, name: str) -> ScenarioConfig:
+def _compact(side: HumanSide, name: str) -> ScenarioConfig:
     """The earlier default world (reproducible: the same states and observations, bit for
     bit — hence the earlier heading-first sector layout)."""
     sim = SimConfig(

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Annotated
 
 import numpy as np
+from annotated_types import MinLen
 
-from pioneer.config import Config, check_nonnegative, check_positive, check_range
+from pioneer.bounds import Count, NonNegative, Positive, Span
+from pioneer.config import Config
 from pioneer.errors import ScenarioError, expect
 from pioneer.sim.world import SimConfig, World
 
@@ -20,12 +23,10 @@ MAX_TRIES = 2000
 class Region(Config):
     """Axis-aligned sampling box [m]; a degenerate box is a fixed point."""
 
-    x: tuple[float, float]
-    y: tuple[float, float]
+    error_type = ScenarioError
 
-    def __post_init__(self) -> None:
-        check_range("Region", "x", *self.x)
-        check_range("Region", "y", *self.y)
+    x: Span
+    y: Span
 
     def sample(self, rng: np.random.Generator) -> np.ndarray:
         """A uniform point in the box, shape ``(2,)``."""
@@ -45,26 +46,25 @@ class Region(Config):
 class HumanSpec(Config):
     """One human: where it starts, the waypoints it follows and where it ends."""
 
+    error_type = ScenarioError
+
     role: str  # "boarding", "exiting", "static" or "walking" (free text for plots)
     start: Region
     goal: Region
     waypoints: tuple[Point, ...] = ()  # [m] visited in order before the goal
-    radius: float = 0.6  # [m] r_h
-    v_pref_choices: tuple[float, ...] = (0.5, 0.6, 0.7)  # [m/s] sampled uniformly
+    radius: Positive = 0.6  # [m] r_h
+    # [m/s] sampled uniformly
+    v_pref_choices: Annotated[tuple[NonNegative, ...], MinLen(1)] = (0.5, 0.6, 0.7)
     static: bool = False  # True: never moves (an obstacle from t = 0)
-    start_delay: tuple[float, float] = (0.0, 0.0)  # [s] sampled; stands still until then
+    start_delay: Span = (0.0, 0.0)  # [s] sampled; stands still until then
     wait_for: tuple[int, ...] = ()  # indices of humans that must have left/arrived first
     # Those waiting for this human go once it heads for waypoint index >= this (None: only
     # once it has arrived or left the map); e.g. 2 = once past its second waypoint.
-    release_waypoint: int | None = None
+    release_waypoint: Count | None = None
     reacts_to_robot: bool = True  # False: the robot is invisible to this human
 
     def __post_init__(self) -> None:
-        check_positive("HumanSpec", "radius", self.radius)
-        if self.release_waypoint is not None and not (
-            isinstance(self.release_waypoint, int)
-            and 1 <= self.release_waypoint <= len(self.waypoints)
-        ):
+        if self.release_waypoint is not None and self.release_waypoint > len(self.waypoints):
             raise ScenarioError(
                 expect(
                     "HumanSpec.release_waypoint",
@@ -73,37 +73,25 @@ class HumanSpec(Config):
                     "fix it or use null",
                 )
             )
-        check_range("HumanSpec", "start_delay", *self.start_delay)
-        if not self.v_pref_choices or any(
-            not (math.isfinite(v) and v >= 0) for v in self.v_pref_choices
-        ):
-            raise ScenarioError(
-                expect(
-                    "HumanSpec.v_pref_choices",
-                    "non-empty, >= 0",
-                    self.v_pref_choices,
-                    "list speeds >= 0 [m/s]",
-                )
-            )
 
 
 @dataclasses.dataclass(frozen=True)
 class ScenarioConfig(Config):
     """Everything that defines a scenario; validated on construction."""
 
+    error_type = ScenarioError
+
     name: str
     walls: tuple[Segment, ...]
     bounds: tuple[float, float, float, float]  # [m] xmin, xmax, ymin, ymax of the map
     robot_start: Region
     robot_goal: Region
-    robot_heading: tuple[float, float]  # [rad] sampled uniformly
+    robot_heading: Span  # [rad] sampled uniformly
     humans: tuple[HumanSpec, ...]
-    min_start_gap: float = 0.05  # [m] clearance between all bodies and walls at t = 0
+    min_start_gap: NonNegative = 0.05  # [m] clearance between all bodies and walls at t = 0
     sim: SimConfig = SimConfig()
 
     def __post_init__(self) -> None:
-        check_nonnegative("ScenarioConfig", "min_start_gap", self.min_start_gap)
-        check_range("ScenarioConfig", "robot_heading", *self.robot_heading)
         xmin, xmax, ymin, ymax = self.bounds
         if not (xmin < xmax and ymin < ymax):
             raise ScenarioError(
