@@ -19,6 +19,7 @@ from pioneer.cli._common import (
 from pioneer.demos.generate import Demonstrator, Selection, generate
 from pioneer.demos.teleop import TeleopSession
 from pioneer.io import to_json
+from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 __all__ = ["DemosGenerate", "DemosShow", "Teleop"]
 
@@ -89,7 +90,7 @@ class Teleop:
 
     out: OutFile
     """dataset .npz (appended to after every episode)"""
-    scenario: str = "hr-rl"
+    scenario: str = DEFAULT_SCENARIO
     """hr-rl, hl-rr, static, …"""
     seed: Seed = default(TeleopSession, "seed")
     """episode k is seeded seed + k"""

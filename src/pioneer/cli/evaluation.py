@@ -26,6 +26,7 @@ from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
 from pioneer.interrupt import kept
 from pioneer.io import to_json
 from pioneer.seeds import SeedSet
+from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 if TYPE_CHECKING:
     from pioneer.envs.policy import Policy
@@ -65,7 +66,7 @@ class Run:
     """Run one episode of a policy and print its record (one JSON line, without per-frame
     series); optionally every frame too, and a drawing."""
 
-    scenario: str = "hr-rl"
+    scenario: str = DEFAULT_SCENARIO
     """hr-rl, hl-rr, static, hr-rl-r03, …"""
     policy: Annotated[str, metavar("POLICY")] = "goal"
     """controller NAME or NAME:key=value,… (e.g. student-mdn:checkpoint=PATH)"""

@@ -37,6 +37,7 @@ from pioneer.laser import UNSEEN_RULES
 from pioneer.laser import UnseenRule as LaserUnseenRule
 from pioneer.learn.dagger import DaggerConfig, run_dagger
 from pioneer.learn.models import MDN_ONLY, StudentConfig
+from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 if TYPE_CHECKING:
     UnseenRule: TypeAlias = LaserUnseenRule
@@ -101,7 +102,7 @@ class TrainCrowdNav:
 
     out: OutDir
     """output folder (checkpoint, policy, curve)"""
-    scenario: str = "hr-rl"
+    scenario: str = DEFAULT_SCENARIO
     """hr-rl, hl-rr, …"""
     ppo: tyro.conf.OmitArgPrefixes[PPOConfig] = PPOConfig()
     """PPO settings"""
@@ -136,7 +137,7 @@ class TrainSb3:
 
     out: OutDir
     """output folder (must not hold an SB3 run)"""
-    scenario: str = "hr-rl"
+    scenario: str = DEFAULT_SCENARIO
     """hr-rl → pioneer/ElevatorHRRL-v1, hl-rr → pioneer/ElevatorHLRR-v1; others by name"""
     steps: int = 1_000_000
     """total environment steps"""

@@ -35,6 +35,7 @@ from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
+from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
 
 __all__ = [
@@ -224,7 +225,7 @@ class _Scores(NamedTuple):
 
 
 def make_teacher(
-    scenario: str = "hr-rl",
+    scenario: str = DEFAULT_SCENARIO,
     reward: str | None = None,
     density: bool = True,
     goal: bool = True,

@@ -23,7 +23,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.registration import ENV_IDS, register_envs
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.events import Event, classify
-from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
+from pioneer.sim.scenarios import DEFAULT_SCENARIO, ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
 __all__ = ["ENV_IDS", "NavEnv", "register_envs", "spaces"]
@@ -63,7 +63,7 @@ class NavEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def __init__(
         self,
-        scenario: str | ScenarioConfig = "hr-rl",
+        scenario: str | ScenarioConfig = DEFAULT_SCENARIO,
         render_mode: str | None = None,
         reward: StepReward | CrowdNavRewardConfig | None = None,
     ) -> None:

@@ -34,7 +34,7 @@ from pioneer.envs.reward import StepReward, step_reward
 from pioneer.errors import ConfigError, expect
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.events import Event, classify
-from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
+from pioneer.sim.scenarios import DEFAULT_SCENARIO, ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
 __all__ = ["NavVectorEnv"]
@@ -53,7 +53,7 @@ class NavVectorEnv(gym.vector.VectorEnv[F32, F32, NDArray[Any]]):
     def __init__(
         self,
         num_envs: int = 1,
-        scenario: str | ScenarioConfig = "hr-rl",
+        scenario: str | ScenarioConfig = DEFAULT_SCENARIO,
         reward: StepReward | CrowdNavRewardConfig | None = None,
         render_mode: str | None = None,
     ) -> None:

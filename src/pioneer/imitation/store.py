@@ -41,9 +41,11 @@ def check_settings(
 ) -> None:
     """Refuse ``mine`` unless every key of it but the ``free`` ones has its value in
     ``stored`` (the settings a run in ``where`` was made with; compared as JSON, so tuples
-    equal lists). Keys only ``stored`` has are no settings any more and are ignored."""
-    new = json.loads(to_json(dict(mine)))
-    diff = [k for k in new if k not in free and stored.get(k) != new[k]]
+    equal lists; a nested config key by key, named ``student.kind``). Keys only ``stored``
+    has are no settings any more and are ignored."""
+    new = _flat(json.loads(to_json(dict(mine))))
+    stored = _flat(dict(stored))
+    diff = [k for k in new if k.split(".")[0] not in free and stored.get(k) != new[k]]
     if diff:
         raise ConfigError(
             expect(
@@ -53,6 +55,17 @@ def check_settings(
                 SETTINGS_FIX,
             )
         )
+
+
+def _flat(settings: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``settings`` with nested dicts spread into dotted keys (``student.kind``)."""
+    out: dict[str, Any] = {}
+    for key, value in settings.items():
+        if isinstance(value, dict):
+            out |= _flat(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def save_episode(path: str | os.PathLike[str], arrays: Mapping[str, Any]) -> str:

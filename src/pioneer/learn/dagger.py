@@ -77,6 +77,7 @@ from pioneer.learn.models import (
 from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
 from pioneer.seeds import dagger_seed
+from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
 
@@ -94,7 +95,7 @@ class DaggerConfig(Config):
     """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
 
     # hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)
-    scenario: str = "hr-rl"
+    scenario: str = DEFAULT_SCENARIO
     student: StudentConfig = StudentConfig()  # the student network
     # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
     # command the robot actually ran) or "teacher" (the teacher's own previous label along the

@@ -14,6 +14,7 @@ from pioneer.sim.scenarios.layouts import (
     static_study_scenario,
 )
 from pioneer.sim.scenarios.registry import (
+    DEFAULT_SCENARIO,
     SCENARIO_FILE_FORMAT,
     SCENARIOS_ENV,
     get_scenario,
@@ -29,6 +30,7 @@ from pioneer.sim.scenarios.sampling import sample_state
 from pioneer.sim.scenarios.spec import HumanSpec, Region, ScenarioConfig
 
 __all__ = [
+    "DEFAULT_SCENARIO",
     "SCENARIOS_ENV",
     "SCENARIO_FILE_FORMAT",
     "ElevatorLayout",

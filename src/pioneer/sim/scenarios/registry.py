@@ -161,6 +161,7 @@ def scenario_base(name: str) -> str:
 
 
 SCENARIO_FILE_FORMAT = "pioneer.scenarios/1"
+DEFAULT_SCENARIO = "hr-rl"  # what a command or an environment runs when not told (paper §V-A)
 SCENARIOS_ENV = "PIONEER_SCENARIOS"  # scenario files (os.pathsep-separated) loaded on demand
 _KINDS: dict[str, tuple[type[Config], Callable[..., ScenarioConfig]]] = {
     "elevator": (ElevatorLayout, elevator_scenario),
