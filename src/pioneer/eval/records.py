@@ -30,15 +30,19 @@ __all__ = [
 ]
 
 # Layout 1 (records without ``format``) named the surface-to-surface gap "clearance" and the
-# centre-to-surface distance "surface"; layout 2 calls them ``gap`` and ``clearance``.
+# centre-to-surface distance "surface"; layout 2 calls them ``gap`` and ``clearance``; layout 3
+# adds ``measures`` and ``series``, which an older record cannot be given (its episode would
+# have to be run again): it is read without them, and the summaries leave it out of the
+# social-navigation measures (pioneer.eval.metrics).
 _V1_FIELDS = {"min_clearance_m": "min_gap_m", "min_wall_clearance_m": "min_wall_gap_m"}
 _V1_FRAMES = {"clearance": "gap", "surface": "clearance"}
 
 
 def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
     """``rec`` in the current layout (:data:`pioneer.eval.episode.RECORD_FORMAT`): a record
-    of layout 1 (no ``format``) has its fields renamed, values untouched, and gains
-    ``format``; a newer layout is refused."""
+    of layout 1 (no ``format``) has its fields renamed, values untouched; one of layout 1 or 2
+    keeps its original version in ``format`` and has no ``measures`` (they need the episode's
+    states); a newer layout is refused."""
     version = rec.get("format", 1)
     if version == RECORD_FORMAT:
         return rec
@@ -51,10 +55,12 @@ def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
                 "read it with the PioneeR version that wrote it (a newer one)",
             )
         )
+    if version >= 2:
+        return rec
     out = {_V1_FIELDS.get(k, k): v for k, v in rec.items()}
     if isinstance(out.get("frames"), dict):
         out["frames"] = {_V1_FRAMES.get(k, k): v for k, v in out["frames"].items()}
-    out["format"] = RECORD_FORMAT
+    out["format"] = 2
     return out
 
 
