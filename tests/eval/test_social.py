@@ -13,6 +13,7 @@ import pytest
 from pioneer.eval.social import (
     HALL_ZONES,
     STILL_SPEED,
+    EpisodeMeasures,
     accelerations,
     closest_approach,
     heading_change,
@@ -252,3 +253,22 @@ def test_the_record_form_is_compact_and_strict_json():
     s = series_of(states, R_R)
     assert s["x"] == [0.0, 0.05, 0.1, 0.15] and s["y"] == [0.0] * 4
     assert s["clearance"] == [None] * 3  # nobody: no clearance
+
+
+def test_an_episode_record_carries_its_measures_and_series():
+    from pioneer.control.registry import build_policy
+    from pioneer.eval.episode import RECORD_FORMAT, run_episode
+
+    rec, _ = run_episode("static", build_policy("goal", "static"), seed=3)
+    d = rec.to_dict()
+    assert d["format"] == RECORD_FORMAT == 3
+    m, s = d["measures"], d["series"]
+    assert set(m) == {f.name for f in dataclasses.fields(EpisodeMeasures)}
+    assert len(s["x"]) == len(s["y"]) == rec.steps + 1 and len(s["clearance"]) == rec.steps
+    assert m["min_clearance_m"] == pytest.approx(rec.min_gap_m + R_R, abs=1e-5)
+    assert min(c for c in s["clearance"] if c is not None) == pytest.approx(
+        m["min_clearance_m"], abs=1e-3
+    )
+    assert rec.event == "collision" and m["person_hit"] == "robot-into-person"
+    assert m["person_role"] == "static" and m["min_ttc_s"] == 0.0
+    assert all(round(x, 3) == x for x in s["x"])  # to the millimetre

@@ -302,7 +302,7 @@ def measure_table(
         for pol in policies
         if f"{sc}/{pol}" in summary
     ]
-    head = ["Scenario", "Method", *(c.head for c in cols), "episodes"]
+    head = ["Scenario", "Method", *(c.head for c in cols), "episodes measured"]
     out = [f"**{title}**", ""]
     if entries:
         out += [interval_note([e for _, _, e in entries]), ""]
