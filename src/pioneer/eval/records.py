@@ -39,10 +39,11 @@ _V1_FRAMES = {"clearance": "gap", "surface": "clearance"}
 
 
 def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
-    """``rec`` in the current layout (:data:`pioneer.eval.episode.RECORD_FORMAT`): a record
-    of layout 1 (no ``format``) has its fields renamed, values untouched; one of layout 1 or 2
-    keeps its original version in ``format`` and has no ``measures`` (they need the episode's
-    states); a newer layout is refused."""
+    """``rec`` with the current layout's names (:data:`pioneer.eval.episode.RECORD_FORMAT`):
+    a record of layout 1 (no ``format``) has its fields renamed, values untouched, and reads
+    as layout 2 (``format: 2``); a record of layout 2 is returned as it is. Neither has
+    ``measures`` or ``series`` (they need the episode's states), and ``format`` keeps saying
+    so. A newer layout is refused."""
     version = rec.get("format", 1)
     if version == RECORD_FORMAT:
         return rec

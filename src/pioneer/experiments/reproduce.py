@@ -475,6 +475,7 @@ def _social_figures(
         out / "figures" / "clearance_distribution.png",
         zones=HALL_ZONES,
         title="Nearest person's clearance over every step of every episode (Hall's zones shaded)",
+        contact=get_scenario(SCENARIOS[0]).sim.robot.radius,
     )
     figs["nearest-person clearance over time, per policy"] = "figures/clearance_distribution.png"
     for sc in SCENARIOS:

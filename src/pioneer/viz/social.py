@@ -25,12 +25,14 @@ def plot_clearance_distribution(
     zones: Sequence[tuple[str, float, float]] = (),
     top: float = 4.0,
     title: str = "",
+    contact: float | None = None,
 ) -> None:
     """Violins of the nearest person's clearance [m] over every step of every episode, one
     violin per policy and one panel per scenario (``panels[scenario][policy]`` = the values;
     infinite ones — nobody there — are left out, values above ``top`` are drawn at ``top``).
-    ``zones`` (name, low, high) [m] are shaded behind, e.g. Hall's proxemic zones. PNG,
-    atomic."""
+    ``zones`` (name, low, high) [m] are shaded behind, e.g. Hall's proxemic zones, and the
+    clearance at ``contact`` [m] (the robot's radius: gap 0) is a dashed line. Under each
+    name, the share of its steps below the second zone's upper bound. PNG, atomic."""
     plt = _pyplot()
     n_pol = max((len(p) for p in panels.values()), default=1)
     fig, axes = plt.subplots(
@@ -48,6 +50,9 @@ def plot_clearance_distribution(
         for k, (zone, lo, hi) in enumerate(zones):
             ax.axhspan(lo, min(hi, top), color=_ZONE_COLOURS[k % 4], alpha=0.08, lw=0)
             ax.text(0.52, (lo + min(hi, top)) / 2, zone, fontsize=7, va="center", alpha=0.7)
+        if contact is not None:
+            ax.axhline(contact, color="tab:red", lw=0.8, ls="--")
+            ax.text(len(names) + 0.55, contact, "contact", fontsize=7, va="bottom", ha="right")
         if data:
             parts = ax.violinplot(data, showmedians=True, widths=0.8)
             for body in parts["bodies"]:
@@ -103,7 +108,11 @@ def plot_occupancy(
     rows = math.ceil(n / cols)
     aspect = (ye[-1] - ye[0]) / (xe[-1] - xe[0])
     fig, axes = plt.subplots(
-        rows, cols, figsize=(2.6 * cols + 0.8, 2.6 * rows * aspect + 0.6), squeeze=False
+        rows,
+        cols,
+        figsize=(2.2 * cols + 1.0, 2.2 * rows * aspect + 0.5),
+        squeeze=False,
+        layout="constrained",
     )
     peak = max((float(g.max()) for g in grids.values()), default=1.0)
     norm = LogNorm(vmin=max(peak * 1e-3, 1e-6), vmax=max(peak, 2e-6))
@@ -127,7 +136,7 @@ def plot_occupancy(
         ax.set_aspect("equal")
         ax.tick_params(labelsize=6)
     if image is not None:
-        bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.8)
+        bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.6, aspect=30)
         bar.set_label(f"share of the policy's steps per {100 * cell:.0f} cm cell", fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
