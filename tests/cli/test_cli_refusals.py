@@ -34,6 +34,7 @@ INVALID: dict[str, tuple[str, str]] = {
         "--out OUT",
         "random.npz",
     ),
+    "summarize": ("summarize IN/random.npz", "an existing folder"),
     "reproduce": ("reproduce --profile smoke --workers 0 --out OUT", "--workers"),
     "sample-layouts": ("sample-layouts --prefix ../../x --n 1 --out OUT", "--prefix"),
     "calibrate": ("calibrate --driver nope --episodes 1 --out OUT", "nope"),

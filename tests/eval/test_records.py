@@ -63,3 +63,11 @@ def test_a_record_of_a_newer_layout_is_refused():
     with pytest.raises(DataError) as err:
         upgrade_record({**V1, "format": RECORD_FORMAT + 1})
     assert_house_message(str(err.value), "record format", "newer")
+
+
+def test_older_records_keep_their_layout_version_and_gain_no_measures():
+    v1 = upgrade_record(dict(V1))
+    assert v1["format"] == 2 and "measures" not in v1 and "series" not in v1
+    v2 = {**v1, "time_s": 3.0}
+    assert upgrade_record(v2) is v2  # layout 2: nothing to rename
+    assert RECORD_FORMAT == 3

@@ -48,6 +48,22 @@ def test_the_report_has_tables_i_to_iv_and_its_figures(smoke: Path) -> None:
         assert (smoke / name).stat().st_size > 0
 
 
+def test_the_report_has_the_social_measures_and_their_figures(smoke: Path) -> None:
+    index = (smoke / "index.md").read_text()
+    assert "## Social navigation measures" in index
+    for sc in SCENARIOS:
+        assert f"**Social measures — {sc.upper()}**" in index
+        assert f"**Smoothness and collisions by kind — {sc.upper()}**" in index
+        assert f"(figures/{sc}-occupancy.png)" in index
+        assert (smoke / "figures" / f"{sc}-occupancy.png").stat().st_size > 0
+    assert "(figures/clearance_distribution.png)" in index
+    assert (smoke / "figures" / "clearance_distribution.png").stat().st_size > 0
+    for row in ("teacher", "dwa", SHIELD):
+        assert any(line.startswith(f"| HR-RL | {row} |") for line in index.splitlines()), row
+    recs = read_records(smoke / "eval" / "episodes.jsonl")
+    assert all(len(r["series"]["x"]) == r["steps"] + 1 for r in recs)
+
+
 def test_no_interval_in_the_report_exceeds_its_quantitys_range(smoke: Path) -> None:
     """One seed: the intervals are over episodes (Wilson for rates) and say so."""
     summary = json.loads((smoke / "summary.json").read_text())

@@ -61,6 +61,9 @@ _TREE = _Group(
         "eval": _Leaf(
             "evaluation:Eval", "evaluate policies: N seeds × M trials, parallel, resumable"
         ),
+        "summarize": _Leaf(
+            "evaluation:Summarize", "re-summarise a run folder from its records (runs nothing)"
+        ),
         "reproduce": _Leaf("evaluation:Reproduce", "the paper's tables and figures (the main job)"),
         "sample-layouts": _Leaf(
             "scenarios:SampleLayouts", "draw valid layouts of the randomised elevator world"

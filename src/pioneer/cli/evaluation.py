@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Annotated, Literal, TypeAlias
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
+
+import tyro
 
 from pioneer.cli._common import (
     Ablation,
@@ -22,6 +25,7 @@ from pioneer.cli._common import (
 )
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
+from pioneer.eval.tables import METRIC_SETS
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
 from pioneer.interrupt import kept
 from pioneer.io import to_json
@@ -36,10 +40,12 @@ if TYPE_CHECKING:
     from pioneer.sim.world import State
 
     ProfileName: TypeAlias = str
+    MetricSet: TypeAlias = str
 else:
     ProfileName = one_of(PROFILES)
+    MetricSet = one_of(METRIC_SETS)
 
-__all__ = ["Eval", "Reproduce", "Run"]
+__all__ = ["Eval", "Reproduce", "Run", "Summarize"]
 
 _PAPER = PROFILES["paper"]  # the paper's protocol: eval's default seeds × trials
 
@@ -102,6 +108,7 @@ class Run:
             for s in traj.states:
                 print(to_json(_frame(s)))
         summary = rec.to_dict()
+        summary.pop("series", None)  # the frame lines (--frames) carry the per-step values
         if not self.frames:
             summary.pop("frames", None)
         print(to_json(summary))
@@ -174,12 +181,16 @@ class Eval:
     overwrite: Flag = False
     """delete the records, manifest and summaries in --out and start over (default: resume,
     if the rows there were made the same way)"""
+    metrics: MetricSet = "paper"
+    """the tables printed: paper (SR, TT, PL … and collisions by kind), social (efficiency,
+    smoothness, social distances, collisions by kind) or all (docs/metrics.md); the summary
+    files hold every one"""
     ablation: Ablations = dataclasses.field(default_factory=Ablation)
 
     def run(self) -> int:
-        """Evaluate, then print the summary of every row."""
+        """Evaluate, then print the chosen tables and the summary of every row."""
         from pioneer.eval.metrics import summarize
-        from pioneer.eval.report import write_summary
+        from pioneer.eval.report import metric_tables, write_summary
 
         require_some("--scenario", self.scenario)
         require_some("--policy", self.policy)
@@ -199,11 +210,8 @@ class Eval:
         )
         summary = summarize(recs)
         write_summary(self.out, summary)
-        for key, s in summary.items():
-            print(
-                f"{key}: SR {s['success_rate']['mean']:.1f}%  TT {s['time_mean_s']['mean']:.2f} s"
-                f"  PL {s['path_length_mean_m']['mean']:.2f} m  ({s['episodes']} episodes)"
-            )
+        print(metric_tables(summary, self.metrics))
+        _print_rows(summary)
         return 0
 
     def _check_backend_flags(self) -> None:
@@ -257,6 +265,36 @@ class Eval:
                 )
             )
         return specs
+
+
+def _print_rows(summary: Mapping[str, Mapping[str, Any]]) -> None:
+    """One line per row: SR, TT, PL and the episodes."""
+    for key, s in summary.items():
+        print(
+            f"{key}: SR {s['success_rate']['mean']:.1f}%  TT {s['time_mean_s']['mean']:.2f} s"
+            f"  PL {s['path_length_mean_m']['mean']:.2f} m  ({s['episodes']} episodes)"
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class Summarize:
+    """Re-summarise a run folder of pioneer eval from its records alone (runs no episode):
+    rewrites RUN_DIR/summary.json, summary.md and summary.csv and prints the tables. Records
+    written before the social-navigation measures leave those columns empty (one note)."""
+
+    run_dir: Annotated[str, tyro.conf.Positional, metavar("RUN_DIR")]
+    """the folder holding episodes.jsonl"""
+    metrics: MetricSet = "paper"
+    """the tables printed: paper, social or all (docs/metrics.md)"""
+
+    def run(self) -> int:
+        """Summarise, write, print."""
+        from pioneer.eval.report import metric_tables, summarize_run
+
+        summary = summarize_run(self.run_dir)
+        print(metric_tables(summary, self.metrics))
+        _print_rows(summary)
+        return 0
 
 
 @dataclasses.dataclass(frozen=True)

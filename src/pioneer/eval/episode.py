@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
 from pioneer.envs.policy import Policy
+from pioneer.eval.social import measure_episode, series_of
 from pioneer.sim.scenarios import ScenarioConfig
 from pioneer.sim.world import State, World, clearance
 
@@ -25,7 +26,9 @@ RISKY_DISTANCE_M = 0.8  # [m]
 # distance is the ``gap`` (``min_gap_m``, ``min_wall_gap_m``, frames ``gap``) and
 # ``clearance`` is centre to surface (frames); 1 (no ``format``) named the gap "clearance" and
 # the centre distance "surface" — :func:`pioneer.eval.records.parse_records` upgrades it.
-RECORD_FORMAT = 2
+# 3: adds ``measures`` (the social-navigation measures, docs/metrics.md) and ``series``
+# (robot x, y and the nearest person's clearance per step); older records lack both.
+RECORD_FORMAT = 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,11 +70,17 @@ class EpisodeRecord:
     # and "epistemic" [(m/s)² + (rad/s)²], and for a shield "shielded" (0/1). None for other
     # policies.
     frames: dict[str, list[float]] | None = None
+    # The social-navigation measures (pioneer.eval.social.EpisodeMeasures.to_dict) and the
+    # per-step series for the pictures: "x", "y" of every state and "clearance" of every step
+    # [m], to the millimetre (pioneer.eval.social.series_of).
+    measures: dict[str, Any] | None = None
+    series: dict[str, list[float | None]] | None = None
     format: int = RECORD_FORMAT  # the record layout's version
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict; an infinite gap becomes ``None``; no ``frames`` key without
-        frames; frame values rounded to 6 significant digits (a compact JSON line)."""
+        """Plain dict; an infinite gap becomes ``None``; no ``frames``, ``measures`` or
+        ``series`` key without them; frame values rounded to 6 significant digits (a compact
+        JSON line)."""
         d = dataclasses.asdict(self)
         for key in ("min_gap_m", "min_wall_gap_m"):
             if not math.isfinite(d[key]):
@@ -80,6 +89,9 @@ class EpisodeRecord:
             del d["frames"]
         else:
             d["frames"] = {k: [_compact(x) for x in v] for k, v in self.frames.items()}
+        for key in ("measures", "series"):
+            if d[key] is None:
+                del d[key]
         return d
 
 
@@ -125,7 +137,7 @@ def run_episode(
     """Run ``policy`` for one episode seeded by ``seed``; optionally keep every state."""
     env = NavEnv(scenario)
     episode = Episode(env, policy, seed)
-    states = [env.state] if record else []
+    states = [env.state]  # references (states are values): the measures are computed at the end
     dt = env.scenario.sim.dt
     close = 0.0
     r_r = env.scenario.sim.robot.radius
@@ -141,11 +153,11 @@ def run_episode(
         wall_min = min(wall_min, float(after["wall_gap"]))
         if after["min_gap"] < close_threshold:
             close += dt
-        if record:
-            states.append(after["state"])
+        states.append(after["state"])
 
     info = episode.run(keep)
     event = str(episode.event)
+    hit = _hit(info) if event == "collision" else None
     rec = EpisodeRecord(
         scenario=env.scenario.name,
         policy=policy.name,
@@ -156,8 +168,10 @@ def run_episode(
         min_gap_m=info["episode_min_gap"],
         time_close_s=close,
         steps=episode.steps,
-        collided_with=_hit(info) if event == "collision" else None,
+        collided_with=hit,
         min_wall_gap_m=wall_min,
         frames=_frame_series(policy, decision_gap, decision_clear),
+        measures=measure_episode(env.scenario, states, event, hit).to_dict(),
+        series=series_of(states, r_r),
     )
     return rec, (Trajectory(env.world, states) if record else None)

@@ -30,15 +30,20 @@ __all__ = [
 ]
 
 # Layout 1 (records without ``format``) named the surface-to-surface gap "clearance" and the
-# centre-to-surface distance "surface"; layout 2 calls them ``gap`` and ``clearance``.
+# centre-to-surface distance "surface"; layout 2 calls them ``gap`` and ``clearance``; layout 3
+# adds ``measures`` and ``series``, which an older record cannot be given (its episode would
+# have to be run again): it is read without them, and the summaries leave it out of the
+# social-navigation measures (pioneer.eval.metrics).
 _V1_FIELDS = {"min_clearance_m": "min_gap_m", "min_wall_clearance_m": "min_wall_gap_m"}
 _V1_FRAMES = {"clearance": "gap", "surface": "clearance"}
 
 
 def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
-    """``rec`` in the current layout (:data:`pioneer.eval.episode.RECORD_FORMAT`): a record
-    of layout 1 (no ``format``) has its fields renamed, values untouched, and gains
-    ``format``; a newer layout is refused."""
+    """``rec`` with the current layout's names (:data:`pioneer.eval.episode.RECORD_FORMAT`):
+    a record of layout 1 (no ``format``) has its fields renamed, values untouched, and reads
+    as layout 2 (``format: 2``); a record of layout 2 is returned as it is. Neither has
+    ``measures`` or ``series`` (they need the episode's states), and ``format`` keeps saying
+    so. A newer layout is refused."""
     version = rec.get("format", 1)
     if version == RECORD_FORMAT:
         return rec
@@ -51,10 +56,12 @@ def upgrade_record(rec: dict[str, Any]) -> dict[str, Any]:
                 "read it with the PioneeR version that wrote it (a newer one)",
             )
         )
+    if version >= 2:
+        return rec
     out = {_V1_FIELDS.get(k, k): v for k, v in rec.items()}
     if isinstance(out.get("frames"), dict):
         out["frames"] = {_V1_FRAMES.get(k, k): v for k, v in out["frames"].items()}
-    out["format"] = RECORD_FORMAT
+    out["format"] = 2
     return out
 
 

@@ -1,32 +1,45 @@
-"""Writing evaluation summaries: ``summary.json``, ``summary.md`` and ``summary.csv``."""
+"""Writing evaluation summaries: ``summary.json``, ``summary.md`` and ``summary.csv``; the
+tables a command prints (``--metrics``); and :func:`summarize_run`, which re-summarises a run
+folder from its records alone (``pioneer summarize``)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from pioneer.eval.tables import csv_table, markdown_table, table_rows
+from pioneer.errors import DataError, expect
+from pioneer.eval.tables import (
+    GROUP_TITLES,
+    GROUPS,
+    METRIC_SETS,
+    csv_table,
+    markdown_table,
+    measure_table,
+    table_rows,
+)
 from pioneer.io import to_json, write_text_atomic
 
-__all__ = ["write_summary"]
+__all__ = ["TableSpec", "metric_tables", "summarize_run", "summary_texts", "write_summary"]
+
+# (paper table id, title, scenarios, policies)
+TableSpec = tuple[str, str, Sequence[str], Sequence[str]]
 
 
-def write_summary(
-    out_dir: str | Path,
-    summary: Mapping[str, Mapping[str, Any]],
-    tables: Sequence[tuple[str, str, Sequence[str], Sequence[str]]] | None = None,
-) -> str:
-    """Write the three summary files (atomically); returns the Markdown.
+def _default_tables(summary: Mapping[str, Mapping[str, Any]]) -> list[TableSpec]:
+    """One table of every scenario and policy (paper numbers from Table I where they exist)."""
+    all_scen = sorted({v["scenario"] for v in summary.values()})
+    all_pols = sorted({v["policy"] for v in summary.values()})
+    return [("I", "Navigation performance", all_scen, all_pols)]
 
-    ``tables`` lists (paper table id, title, scenarios, policies); by default one table of
-    every scenario and policy in ``summary`` (paper numbers from Table I where they exist).
-    """
-    out = Path(out_dir)
-    if tables is None:
-        all_scen = sorted({v["scenario"] for v in summary.values()})
-        all_pols = sorted({v["policy"] for v in summary.values()})
-        tables = [("I", "Navigation performance", all_scen, all_pols)]
+
+def summary_texts(
+    summary: Mapping[str, Mapping[str, Any]], tables: Sequence[TableSpec] | None = None
+) -> tuple[dict[str, str], str]:
+    """The three files' texts (``{"summary.json": …, "summary.md": …, "summary.csv": …}``) and
+    the Markdown of the paper-style tables; see :func:`write_summary`."""
+    tables = list(tables) if tables is not None else _default_tables(summary)
     md_parts: list[str] = []
     csv_parts: list[str] = []
     for table, title, scenarios, policies in tables:
@@ -35,7 +48,119 @@ def write_summary(
         csv = csv_table(rows, table)
         csv_parts.append(csv if not csv_parts else csv.split("\n", 1)[1])
     md = "\n".join(md_parts)
-    write_text_atomic(out / "summary.json", to_json(summary, indent=2))
-    write_text_atomic(out / "summary.md", md)
-    write_text_atomic(out / "summary.csv", "".join(csv_parts))
+    scen, pols = _order(summary, tables)
+    measures = "\n".join(measure_table(summary, scen, pols, [g], GROUP_TITLES[g]) for g in GROUPS)
+    texts = {
+        "summary.json": to_json(summary, indent=2),
+        "summary.md": md + "\n" + measures,
+        "summary.csv": "".join(csv_parts),
+    }
+    return texts, md
+
+
+def write_summary(
+    out_dir: str | Path,
+    summary: Mapping[str, Mapping[str, Any]],
+    tables: Sequence[TableSpec] | None = None,
+) -> str:
+    """Write the three summary files (each atomically, all computed before the first is
+    written); returns the Markdown of the paper-style tables (``summary.md`` adds one table
+    per group of social-navigation measures).
+
+    ``tables`` lists (paper table id, title, scenarios, policies); by default one table of
+    every scenario and policy in ``summary`` (paper numbers from Table I where they exist).
+    ``summary.json`` holds every metric of :func:`pioneer.eval.metrics.summarize`, and
+    ``summary.csv`` every one of them beside the paper's columns.
+    """
+    out = Path(out_dir)
+    texts, md = summary_texts(summary, tables)
+    for name, text in texts.items():
+        write_text_atomic(out / name, text)
     return md
+
+
+def _order(
+    summary: Mapping[str, Mapping[str, Any]], tables: Sequence[TableSpec]
+) -> tuple[list[str], list[str]]:
+    """Scenarios and policies in the tables' order, then the rest of ``summary`` sorted."""
+    scen = _in_order([sc for t in tables for sc in t[2]], (v["scenario"] for v in summary.values()))
+    pols = _in_order([p for t in tables for p in t[3]], (v["policy"] for v in summary.values()))
+    return scen, pols
+
+
+def _in_order(first: Sequence[str], every: Iterable[str]) -> list[str]:
+    """``first`` without repeats, then the rest of ``every`` sorted."""
+    head = list(dict.fromkeys(first))
+    return head + sorted(set(every) - set(head))
+
+
+def metric_tables(
+    summary: Mapping[str, Mapping[str, Any]],
+    metrics: str = "paper",
+    tables: Sequence[TableSpec] | None = None,
+) -> str:
+    """The Markdown tables of the column groups ``metrics`` selects
+    (:data:`pioneer.eval.tables.METRIC_SETS`: ``paper`` — the paper's table and collisions by
+    kind; ``social`` — efficiency, smoothness, social distances and collisions by kind;
+    ``all``)."""
+    if metrics not in METRIC_SETS:
+        raise DataError(expect("--metrics", f"one of {sorted(METRIC_SETS)}", metrics, "pick one"))
+    tables = list(tables) if tables is not None else _default_tables(summary)
+    scen, pols = _order(summary, tables)
+    parts = []
+    for group in METRIC_SETS[metrics]:
+        if group == "paper":
+            parts += [
+                markdown_table(table_rows(t, summary, sc, po), title) for t, title, sc, po in tables
+            ]
+        else:
+            parts.append(measure_table(summary, scen, pols, [group], GROUP_TITLES[group]))
+    return "\n".join(parts)
+
+
+def summarize_run(run_dir: str | Path) -> dict[str, dict[str, Any]]:
+    """Re-summarise the run folder ``run_dir`` from its ``episodes.jsonl`` alone and rewrite
+    its ``summary.json``, ``summary.md`` and ``summary.csv`` (the tables of ``pioneer eval``);
+    returns the summary. The records file is only read. A folder without records, or records
+    that cannot be read, raise :class:`DataError` before anything is written. Records written
+    before the social-navigation measures (format < 3) leave those columns empty: one note on
+    stderr says how many.
+    """
+    from pioneer.eval.harness import EPISODES_FILE
+    from pioneer.eval.metrics import summarize
+    from pioneer.eval.records import parse_records
+
+    run = Path(run_dir)
+    fix = "name a folder written by pioneer eval (it holds episodes.jsonl)"
+    if not run.is_dir():
+        raise DataError(expect("run folder", "an existing folder", str(run), fix))
+    path = run / EPISODES_FILE
+    if not path.is_file():
+        nested = run / "eval" / EPISODES_FILE
+        if nested.is_file():  # a `pioneer reproduce` folder: its evaluation is in eval/
+            fix = f"name its evaluation folder, {run / 'eval'}"
+        raise DataError(expect(f"{run}", f"a run folder with {EPISODES_FILE}", "none", fix))
+    records, _, duplicates = parse_records(path)
+    if duplicates:
+        print(
+            f"pioneer: warning: {path}: {duplicates} repeated episode record(s) ignored (each "
+            "scenario, policy, seed and trial counts once: the first)",
+            file=sys.stderr,
+        )
+    if path.read_bytes()[-1:] not in (b"", b"\n"):
+        print(f"pioneer: warning: {path}: an unfinished last line ignored", file=sys.stderr)
+    if not records:
+        raise DataError(
+            expect(str(path), "at least one episode record", 0, "run pioneer eval into it first")
+        )
+    summary = summarize(records)
+    write_summary(run, summary)
+    old = sum(1 for r in records if not isinstance(r.get("measures"), Mapping))
+    if old:
+        print(
+            f"pioneer: note: {old} of {len(records)} episodes in {path} were recorded before the "
+            "social-navigation measures (record format < 3): their measure columns are empty; "
+            "re-run the evaluation into a new --out to measure them",
+            file=sys.stderr,
+        )
+    return summary

@@ -1,14 +1,29 @@
-"""Tables laid out like the paper's, with the paper's numbers beside ours (Markdown and CSV)."""
+"""Tables laid out like the paper's, with the paper's numbers beside ours (Markdown and CSV),
+and the tables of the social-navigation measures (docs/metrics.md) by group of columns."""
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["PAPER", "TableRow", "csv_table", "interval_note", "markdown_table", "table_rows"]
+from pioneer.eval.metrics import MEASURES
+
+__all__ = [
+    "GROUPS",
+    "METRIC_SETS",
+    "PAPER",
+    "Column",
+    "TableRow",
+    "csv_table",
+    "interval_note",
+    "markdown_table",
+    "measure_table",
+    "table_rows",
+]
 
 # Paper values: (SR %, TT s, PL m) per (table, scenario, row label). Tables I–III.
 PAPER: dict[tuple[str, str, str], tuple[float, float, float]] = {
@@ -47,7 +62,7 @@ def _fmt(cell: Mapping[str, float], digits: int) -> str:
     return f"{mean:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
-def interval_note(rows: Sequence[TableRow]) -> str:
+def interval_note(rows: Sequence[Mapping[str, Any]]) -> str:
     """One sentence saying over what the table's intervals were computed."""
     kinds = {(r["interval"], r["seeds"]) for r in rows}
     over_seeds = {n for k, n in kinds if k == "seeds"}
@@ -98,6 +113,7 @@ def table_rows(
                     "timeout": s["timeout_rate"],
                     "min_clear": s["min_gap_m"],
                     "paper": paper,
+                    "entry": s,  # every metric of the row (the CSV's measure columns)
                 }
             )
     return rows
@@ -144,6 +160,7 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
     """CSV with one line per row: our means, CI half-widths and the paper's values."""
     buf = io.StringIO()
     w = csv.writer(buf)
+    extra = [f"{k}{part}" for k in MEASURES for part in ("", "_ci95", "_lo", "_hi")]
     w.writerow(
         [
             "table",
@@ -165,6 +182,8 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
             "paper_sr",
             "paper_tt_s",
             "paper_pl_m",
+            "measured",
+            *extra,
         ]
     )
     for r in rows:
@@ -188,6 +207,119 @@ def csv_table(rows: Sequence[TableRow], table: str) -> str:
                 r["timeout"]["mean"],
                 r["min_clear"]["mean"],
                 *p,
+                r["entry"].get("measured", ""),
+                *_measure_cells(r["entry"]),
             ]
         )
     return buf.getvalue()
+
+
+def _measure_cells(entry: Mapping[str, Any]) -> list[Any]:
+    """mean, ci95, lo, hi of every measure (empty where the entry has none)."""
+    cells: list[Any] = []
+    for k in MEASURES:
+        cell = entry.get(k) or {}
+        cells += [cell.get(part, "") for part in ("mean", "ci95", "lo", "hi")]
+    return cells
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    """A column of a measure table: the summary key, its header and how it is printed."""
+
+    key: str
+    head: str
+    digits: int
+    scale: float = 1.0  # shares of time [0, 1] are printed in %
+
+
+# The columns of each group (docs/metrics.md); ↑: higher is better, ↓: lower is better.
+GROUPS: dict[str, tuple[Column, ...]] = {
+    "collisions": (
+        Column("collision_rate", "all ↓ (%)", 1),
+        Column("wall_collision_rate", "wall ↓ (%)", 1),
+        Column("robot_into_person_rate", "robot → person ↓ (%)", 1),
+        Column("person_into_robot_rate", "person → robot ↓ (%)", 1),
+        Column("exiting_collision_rate", "exiting person ↓ (%)", 1),
+        Column("boarding_collision_rate", "boarding person ↓ (%)", 1),
+        Column("other_person_collision_rate", "other person ↓ (%)", 1),
+    ),
+    "efficiency": (
+        Column("spl", "SPL ↑", 3),
+        Column("path_efficiency", "path eff. ↑", 3),
+        Column("time_still_s", "still ↓ (s)", 2),
+        Column("stall_rate", "stalled ↓ (%)", 1),
+    ),
+    "smoothness": (
+        Column("accel_mean_m_s2", "mean abs(a) ↓ (m/s²)", 3),
+        Column("accel_max_m_s2", "max abs(a) ↓ (m/s²)", 2),
+        Column("jerk_mean_m_s3", "mean abs(jerk) ↓ (m/s³)", 2),
+        Column("jerk_max_m_s3", "max abs(jerk) ↓ (m/s³)", 1),
+        Column("heading_change_rad", "heading change ↓ (rad)", 2),
+        Column("path_irregularity_rad_m", "irregularity ↓ (rad/m)", 3),
+    ),
+    "social": (
+        Column("min_gap_m", "min gap ↑ (m)", 2),
+        Column("min_clearance_m", "min clearance ↑ (m)", 2),
+        Column("intimate_share", "intimate ↓ (% time)", 1, 100.0),
+        Column("personal_share", "personal (% time)", 1, 100.0),
+        Column("social_share", "social (% time)", 1, 100.0),
+        Column("space_compliance", "space compliance ↑ (%)", 1, 100.0),
+        Column("min_ttc_s", "min TTC ↑ (s)", 2),
+    ),
+}
+GROUP_TITLES = {
+    "collisions": "Collisions by kind (% of episodes)",
+    "efficiency": "Efficiency",
+    "smoothness": "Smoothness",
+    "social": "Social distances",
+}
+# What ``pioneer eval --metrics`` prints: "paper" is the paper's table (SR, TT, PL, …).
+METRIC_SETS: dict[str, tuple[str, ...]] = {
+    "paper": ("paper", "collisions"),
+    "social": ("efficiency", "smoothness", "social", "collisions"),
+    "all": ("paper", "collisions", "efficiency", "smoothness", "social"),
+}
+
+
+def _scaled(cell: Mapping[str, float], scale: float) -> dict[str, float]:
+    return {k: v * scale if isinstance(v, int | float) else v for k, v in cell.items()}
+
+
+def measure_table(
+    summary: Mapping[str, Mapping[str, Any]],
+    scenarios: Sequence[str],
+    policies: Sequence[str],
+    groups: Sequence[str],
+    title: str,
+) -> str:
+    """A Markdown table of the columns of ``groups`` (:data:`GROUPS`), one row per (scenario,
+    policy) in ``summary``, each cell with its 95 % interval (:func:`interval_note`)."""
+    cols = [c for g in groups for c in GROUPS[g]]
+    entries = [
+        (sc, pol, summary[f"{sc}/{pol}"])
+        for sc in scenarios
+        for pol in policies
+        if f"{sc}/{pol}" in summary
+    ]
+    head = ["Scenario", "Method", *(c.head for c in cols), "episodes measured"]
+    out = [f"**{title}**", ""]
+    if entries:
+        out += [interval_note([e for _, _, e in entries]), ""]
+    unmeasured = sum(
+        int(e["episodes"]) - int(e.get("measured", e["episodes"])) for *_, e in entries
+    )
+    if unmeasured:
+        out += [
+            f"{unmeasured} episode(s) were recorded before these measures (record format < 3): "
+            "their cells are left out (– where a row has none); re-run the evaluation into a "
+            "new --out to measure them.",
+            "",
+        ]
+    out += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for sc, pol, e in entries:
+        cells = [sc.upper(), pol]
+        cells += [_fmt(_scaled(e.get(c.key, {}), c.scale), c.digits) for c in cols]
+        cells.append(str(e.get("measured", e["episodes"])))
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"

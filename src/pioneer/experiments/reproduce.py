@@ -6,8 +6,11 @@ Steps (each output is written atomically; the evaluation resumes if interrupted)
    DAgger students — MDN, MLP and the uncertainty-shielded MDN (Table III) — on HR-RL and HL-RR;
 3. write ``summary.json``, ``summary.md`` and ``summary.csv`` (our rows beside the paper's) and
    the safe/risky uncertainty analysis of the MDN (Table IV, ``uncertainty.json``, histogram);
-4. the static-study figure (paper Fig. 3), a trajectory plot and a GIF per scenario;
-5. ``index.md``, a report that links everything.
+4. the social-navigation measures of every row (docs/metrics.md): two tables per scenario, the
+   distribution of the nearest person's clearance and a heat map of where each row's robot
+   drives;
+5. the static-study figure (paper Fig. 3), a trajectory plot and a GIF per scenario;
+6. ``index.md``, a report that links everything.
 """
 
 from __future__ import annotations
@@ -292,8 +295,11 @@ def _reproduce(
         ],
     )
     md += _table_iv(out, records)
+    rows = [p.row for p in policies]
+    md += _social_tables(summary, rows)
     md += _time_table(records, worker_count(workers))
-    figures = _figures(out, reward_tpl)
+    figures = _social_figures(out, records, rows)
+    figures.update(_figures(out, reward_tpl))
     elapsed = time.perf_counter() - t0
     episode_s = sum(float(r.get("wall_time_s", 0.0)) for r in records)
     write_text_atomic(
@@ -405,6 +411,84 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         + table_iv_markdown(matched, SCENARIOS)
         + "\n![uncertainty histograms](figures/uncertainty_safe_risky.png)\n"
     )
+
+
+def _social_tables(summary: Mapping[str, Mapping[str, Any]], rows: Sequence[str]) -> str:
+    """Markdown: the social-navigation measures of every row, two tables per scenario."""
+    from pioneer.eval.tables import measure_table
+
+    parts = [
+        "\n## Social navigation measures",
+        "",
+        "Beyond the paper: efficiency, smoothness, distances to people and collisions by kind "
+        "(definitions, units and sources: docs/metrics.md). Shares of time are of the "
+        "episodes' steps; the clearance is from the robot's centre to the nearest person's "
+        "surface, the gap surface to surface.",
+        "",
+    ]
+    for sc in SCENARIOS:
+        parts.append(
+            measure_table(
+                summary, [sc], rows, ["efficiency", "social"], f"Social measures — {sc.upper()}"
+            )
+        )
+        parts.append(
+            measure_table(
+                summary,
+                [sc],
+                rows,
+                ["smoothness", "collisions"],
+                f"Smoothness and collisions by kind — {sc.upper()}",
+            )
+        )
+    return "\n".join(parts) + "\n"
+
+
+def _social_figures(
+    out: Path, records: Sequence[Mapping[str, Any]], rows: Sequence[str]
+) -> dict[str, str]:
+    """The nearest-person clearance over time per row (violins) and, per scenario, where each
+    row's robot drives (occupancy), from the records' per-step series."""
+    from pioneer.eval.social import HALL_ZONES
+    from pioneer.sim.scenarios import get_scenario
+    from pioneer.viz.social import plot_clearance_distribution, plot_occupancy
+
+    clear: dict[str, dict[str, list[float]]] = {sc: {} for sc in SCENARIOS}
+    where: dict[str, dict[str, list[list[float]]]] = {sc: {} for sc in SCENARIOS}
+    for r in records:
+        series = r.get("series")
+        if r["scenario"] not in clear or not isinstance(series, Mapping):
+            continue
+        c = clear[r["scenario"]].setdefault(r["policy"], [])
+        c.extend(x for x in series["clearance"] if x is not None)
+        xy = where[r["scenario"]].setdefault(r["policy"], [])
+        xy.extend([x, y] for x, y in zip(series["x"], series["y"], strict=True))
+
+    def ordered(d: Mapping[str, Any]) -> dict[str, Any]:
+        return {row: d[row] for row in rows if row in d}
+
+    figs: dict[str, str] = {}
+    if not any(where.values()):
+        return figs
+    plot_clearance_distribution(
+        {sc.upper(): ordered(clear[sc]) for sc in SCENARIOS},
+        out / "figures" / "clearance_distribution.png",
+        zones=HALL_ZONES,
+        title="Nearest person's clearance over every step of every episode (Hall's zones shaded)",
+        contact=get_scenario(SCENARIOS[0]).sim.robot.radius,
+    )
+    figs["nearest-person clearance over time, per policy"] = "figures/clearance_distribution.png"
+    for sc in SCENARIOS:
+        if not where[sc]:
+            continue
+        plot_occupancy(
+            get_scenario(sc).world(),
+            ordered(where[sc]),
+            out / "figures" / f"{sc}-occupancy.png",
+            title=f"{sc.upper()} · where each policy's robot drives (all evaluation episodes)",
+        )
+        figs[f"{sc} occupancy of the robot, per policy"] = f"figures/{sc}-occupancy.png"
+    return figs
 
 
 def _figures(out: Path, reward_tpl: str) -> dict[str, str]:
