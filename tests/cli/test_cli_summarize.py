@@ -71,7 +71,16 @@ def test_old_records_leave_the_measure_columns_empty_with_one_note(run, tmp_path
         rec["format"] = 2
         lines.append(json.dumps(rec))
     (old / EPISODES_FILE).write_text("\n".join(lines) + "\n")
-    assert main(["summarize", str(old), "--metrics", "all"]) == 0
+    # asked for the social measures, records that hold none are refused, nothing written
+    before = file_tree(tmp_path)
+    code = main(["summarize", str(old), "--metrics", "all"])
+    one_error_line(capsys.readouterr().err, code, "format 3")
+    assert file_tree(tmp_path) == before
+    # the paper's metrics (the default) are all there; the measure columns stay empty
+    assert main(["summarize", str(old)]) == 0
+    assert main(["summarize", str(old), "--metrics", "paper"]) == 0
+    capsys.readouterr()
+    assert main(["summarize", str(old)]) == 0
     captured = capsys.readouterr()
     notes = captured.err.strip().splitlines()
     assert len(notes) == 1 and notes[0].startswith("pioneer: note: 2 of 2 episodes")
@@ -80,7 +89,7 @@ def test_old_records_leave_the_measure_columns_empty_with_one_note(run, tmp_path
     goal = summary["static/goal"]
     assert goal["collision_rate"]["mean"] == 100.0  # the paper's metrics are all there
     assert goal["measured"] == 0 and goal["spl"]["mean"] is None  # NaN → null
-    assert "| STATIC | goal | – | – | – | – | 0 |" in captured.out  # efficiency: empty
+    assert "| STATIC | goal |" in captured.out  # the paper's table with collisions by kind
 
 
 @pytest.mark.parametrize("case", ["missing", "empty", "reproduce", "corrupt", "no-records"])

@@ -280,7 +280,8 @@ def _print_rows(summary: Mapping[str, Mapping[str, Any]]) -> None:
 class Summarize:
     """Re-summarise a run folder of pioneer eval from its records alone (runs no episode):
     rewrites RUN_DIR/summary.json, summary.md and summary.csv and prints the tables. Records
-    written before the social-navigation measures leave those columns empty (one note)."""
+    written before the social-navigation measures leave those columns empty (one note);
+    --metrics social or all on a run of such records only is refused."""
 
     run_dir: Annotated[str, tyro.conf.Positional, metavar("RUN_DIR")]
     """the folder holding episodes.jsonl"""
@@ -291,7 +292,7 @@ class Summarize:
         """Summarise, write, print."""
         from pioneer.eval.report import metric_tables, summarize_run
 
-        summary = summarize_run(self.run_dir)
+        summary = summarize_run(self.run_dir, self.metrics)
         print(metric_tables(summary, self.metrics))
         _print_rows(summary)
         return 0

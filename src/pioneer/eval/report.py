@@ -118,13 +118,14 @@ def metric_tables(
     return "\n".join(parts)
 
 
-def summarize_run(run_dir: str | Path) -> dict[str, dict[str, Any]]:
+def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict[str, Any]]:
     """Re-summarise the run folder ``run_dir`` from its ``episodes.jsonl`` alone and rewrite
     its ``summary.json``, ``summary.md`` and ``summary.csv`` (the tables of ``pioneer eval``);
     returns the summary. The records file is only read. A folder without records, or records
     that cannot be read, raise :class:`DataError` before anything is written. Records written
     before the social-navigation measures (format < 3) leave those columns empty: one note on
-    stderr says how many.
+    stderr says how many; asked for the social measures (``metrics`` "social" or "all") of a
+    run none of whose records holds them, it refuses (:class:`DataError`, nothing written).
     """
     from pioneer.eval.harness import EPISODES_FILE
     from pioneer.eval.metrics import summarize
@@ -153,9 +154,21 @@ def summarize_run(run_dir: str | Path) -> dict[str, dict[str, Any]]:
         raise DataError(
             expect(str(path), "at least one episode record", 0, "run pioneer eval into it first")
         )
+    old = sum(1 for r in records if not isinstance(r.get("measures"), Mapping))
+    if old == len(records) and metrics in ("social", "all"):
+        from pioneer.eval.episode import RECORD_FORMAT
+
+        formats = sorted({int(r.get("format", 1)) for r in records})
+        raise DataError(
+            expect(
+                f"{path}: records",
+                f"format {RECORD_FORMAT} (with the social-navigation measures)",
+                f"format {', '.join(map(str, formats))} only",
+                "re-run the evaluation into a new --out to measure them, or use --metrics paper",
+            )
+        )
     summary = summarize(records)
     write_summary(run, summary)
-    old = sum(1 for r in records if not isinstance(r.get("measures"), Mapping))
     if old:
         print(
             f"pioneer: note: {old} of {len(records)} episodes in {path} were recorded before the "
