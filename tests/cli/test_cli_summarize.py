@@ -119,3 +119,10 @@ def test_an_unknown_metric_set_is_refused(run, capsys):
         main(["summarize", str(run), "--metrics", "everything"])
     assert exc.value.code == 2
     assert "everything" in capsys.readouterr().err
+
+
+def test_the_summary_line_shows_no_time_without_a_success(run, capsys):
+    """The go-to-goal robot collides in every episode: TT and PL (over successes) are "–"."""
+    assert main(["summarize", str(run)]) == 0
+    line = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("static/goal:")]
+    assert len(line) == 1 and line[0].startswith("static/goal: SR 0.0%  TT –  PL –  (")

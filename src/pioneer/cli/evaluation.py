@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
@@ -25,6 +26,7 @@ from pioneer.cli._common import (
 )
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
+from pioneer.eval.report import metric_tables
 from pioneer.eval.tables import METRIC_SETS
 from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
 from pioneer.interrupt import kept
@@ -181,7 +183,7 @@ class Eval:
     overwrite: Flag = False
     """delete the records, manifest and summaries in --out and start over (default: resume,
     if the rows there were made the same way)"""
-    metrics: MetricSet = "paper"
+    metrics: MetricSet = default(metric_tables, "metrics")
     """the tables printed: paper (SR, TT, PL … and collisions by kind), social (efficiency,
     smoothness, social distances, collisions by kind) or all (docs/metrics.md); the summary
     files hold every one"""
@@ -190,7 +192,7 @@ class Eval:
     def run(self) -> int:
         """Evaluate, then print the chosen tables and the summary of every row."""
         from pioneer.eval.metrics import summarize
-        from pioneer.eval.report import metric_tables, write_summary
+        from pioneer.eval.report import write_summary
 
         require_some("--scenario", self.scenario)
         require_some("--policy", self.policy)
@@ -268,11 +270,17 @@ class Eval:
 
 
 def _print_rows(summary: Mapping[str, Mapping[str, Any]]) -> None:
-    """One line per row: SR, TT, PL and the episodes."""
+    """One line per row: SR, TT, PL and the episodes (TT and PL are over successes: "–"
+    without any)."""
+
+    def value(x: float | None, unit: str) -> str:
+        return f"{x:.2f} {unit}" if x is not None and math.isfinite(x) else "–"
+
     for key, s in summary.items():
         print(
-            f"{key}: SR {s['success_rate']['mean']:.1f}%  TT {s['time_mean_s']['mean']:.2f} s"
-            f"  PL {s['path_length_mean_m']['mean']:.2f} m  ({s['episodes']} episodes)"
+            f"{key}: SR {s['success_rate']['mean']:.1f}%  "
+            f"TT {value(s['time_mean_s']['mean'], 's')}  "
+            f"PL {value(s['path_length_mean_m']['mean'], 'm')}  ({s['episodes']} episodes)"
         )
 
 
@@ -285,12 +293,12 @@ class Summarize:
 
     run_dir: Annotated[str, tyro.conf.Positional, metavar("RUN_DIR")]
     """the folder holding episodes.jsonl"""
-    metrics: MetricSet = "paper"
+    metrics: MetricSet = default(metric_tables, "metrics")
     """the tables printed: paper, social or all (docs/metrics.md)"""
 
     def run(self) -> int:
         """Summarise, write, print."""
-        from pioneer.eval.report import metric_tables, summarize_run
+        from pioneer.eval.report import summarize_run
 
         summary = summarize_run(self.run_dir, self.metrics)
         print(metric_tables(summary, self.metrics))
