@@ -272,6 +272,20 @@ def test_final_student_loads_with_dagger_info(run_mdn):
     assert first["round"] == 0 and len(first["loss_history"]) == TINY_CFG.epochs_initial
 
 
+def test_warm_started_rounds_keep_round_0s_normalisation(run_mdn):
+    # Re-fitting the standardisation under trained weights would shift the network's inputs
+    # and outputs before any training; it is fitted once, on round 0's frames.
+    res, _ = run_mdn
+    models = [load_student(res.out / f"rounds/round-{r:02d}/student.safetensors") for r in range(3)]
+    eps = sorted((res.out / "rounds/round-00").glob("ep-*.npz"))
+    obs = np.concatenate([np.load(p)["obs"] for p in eps])
+    first = models[0]
+    assert torch.allclose(first.obs_mean, torch.as_tensor(obs.mean(axis=0)), atol=1e-5)
+    for later in models[1:]:
+        for name in ("obs_mean", "obs_std", "act_mean", "act_std"):
+            assert torch.equal(getattr(later, name), getattr(first, name)), name
+
+
 def test_episode_files_hold_labelled_frames(run_mdn):
     res, _ = run_mdn
     eps = _episodes(res.out)

@@ -31,6 +31,8 @@ one student for many worlds (docs/student.md).
 
 Retraining: round 0 trains a fresh network for ``epochs_initial`` epochs; later rounds go on
 from the previous weights for ``epochs_per_round`` epochs over the whole aggregate (warm start).
+The input/output standardisation is fitted on round 0's frames, with the fresh network, and
+kept: re-fitting it under trained weights would move the network's function before training.
 """
 
 from __future__ import annotations
@@ -334,15 +336,19 @@ class _Students:
     def fit(self, step: Step[Data, Student]) -> tuple[Student, dict[str, Any]]:
         cfg, rnd = self.cfg, step.round
         model = step.previous
+        fresh = model is None
         if model is None:
             model = build_student(cfg.student, seed=cfg.seed)
         epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
         x, y = step.data
         history: list[float] = []
         if epochs > 0:
+            # The normalisation is fitted once, for the fresh network: re-fitting it under
+            # warm-started weights would shift every input and output of a trained network.
             history = train_student(
-                model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd
-            )
+                model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd,
+                fit_normalizer=fresh,
+            )  # fmt: skip
         info = {
             "scenario": cfg.scenario,
             "source": "dagger",
