@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,7 @@ __all__ = [
     "parse_records",
     "read_records",
     "upgrade_record",
+    "warn_duplicates",
 ]
 
 # Layout 1 (records without ``format``) named the surface-to-surface gap "clearance" and the
@@ -121,6 +123,16 @@ def parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
     return out, whole, duplicates
 
 
+def warn_duplicates(path: Path, duplicates: int) -> None:
+    """Say on stderr how many repeated records :func:`parse_records` ignored (none: nothing)."""
+    if duplicates:
+        print(
+            f"pioneer: warning: {path}: {duplicates} repeated episode record(s) ignored (each "
+            "scenario, policy, seed and trial counts once: the first)",
+            file=sys.stderr,
+        )
+
+
 def read_records(path: str | Path) -> list[dict[str, Any]]:
     """All records of an ``episodes.jsonl``, each episode (scenario, policy, seed, trial) once;
     a malformed line raises :class:`DataError`.
@@ -130,16 +142,9 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
     ignored. A last line without a newline (a write cut by a crash) is dropped with a warning
     on stderr, since its episode will simply be run again.
     """
-    import sys
-
     p = Path(path)
     records, whole, duplicates = parse_records(p)
-    if duplicates:
-        print(
-            f"pioneer: warning: {p}: {duplicates} repeated episode record(s) ignored (each "
-            "scenario, policy, seed and trial counts once: the first)",
-            file=sys.stderr,
-        )
+    warn_duplicates(p, duplicates)
     if _torn(p):
         print(
             f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",

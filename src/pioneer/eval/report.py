@@ -129,7 +129,7 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
     """
     from pioneer.eval.harness import EPISODES_FILE
     from pioneer.eval.metrics import summarize
-    from pioneer.eval.records import parse_records
+    from pioneer.eval.records import parse_records, warn_duplicates
 
     run = Path(run_dir)
     fix = "name a folder written by pioneer eval (it holds episodes.jsonl)"
@@ -142,12 +142,7 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
             fix = f"name its evaluation folder, {run / 'eval'}"
         raise DataError(expect(f"{run}", f"a run folder with {EPISODES_FILE}", "none", fix))
     records, _, duplicates = parse_records(path)
-    if duplicates:
-        print(
-            f"pioneer: warning: {path}: {duplicates} repeated episode record(s) ignored (each "
-            "scenario, policy, seed and trial counts once: the first)",
-            file=sys.stderr,
-        )
+    warn_duplicates(path, duplicates)
     if path.read_bytes()[-1:] not in (b"", b"\n"):
         print(f"pioneer: warning: {path}: an unfinished last line ignored", file=sys.stderr)
     if not records:
