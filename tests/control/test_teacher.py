@@ -11,7 +11,7 @@ import pytest
 
 from pioneer.control.registry import build_policy, policy_names
 from pioneer.control.rollout import rollout
-from pioneer.control.teacher import LookaheadTeacher, TeacherConfig, make_teacher
+from pioneer.control.teacher import LookaheadTeacher, SoftMargins, TeacherConfig, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
@@ -245,6 +245,64 @@ def test_safety_margin_bounds_the_predicted_clearance_of_the_choice(margin):
     assert not ro.collided[d.index]
     expected = int((~ro.collided & (ro.min_gap >= margin)).sum())
     assert d.n_feasible == expected < d0.n_feasible
+
+
+def _beside_the_route():
+    """A person standing just beside the straight route to the goal (the plain teacher passes
+    closer than 0.2 m)."""
+    world = room_world(3.0, 3.0)
+    state = make_state(
+        (0.0, 0.0, 0.0), goal=(2.5, 0.0), humans=[{"pos": (1.6, 0.45), "status": ARRIVED}]
+    )
+    return world, state
+
+
+@pytest.mark.parametrize("margin", [0.2, 0.3])
+def test_a_soft_margin_is_kept_when_some_candidate_keeps_it(margin):
+    world, state = _beside_the_route()
+    plain = LookaheadTeacher(None)
+    d0 = plain.decide(world, state)
+    ro = _rollout_of(plain, world, state)
+    assert ro.min_gap[d0.index] < margin
+    soft = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(human=margin)))
+    d = soft.decide(world, state)
+    assert ro.min_gap[d.index] >= margin and not ro.collided[d.index]
+    # the best-scoring candidate among those that keep the margin (brute force)
+    keep = ~ro.collided & (ro.min_gap >= margin)
+    scores = plain.scores(world, state)
+    assert d.index == int(np.argmax(np.where(keep, scores, -np.inf)))
+    # soft: every collision-free candidate still counts as feasible
+    assert d.n_feasible == d0.n_feasible
+
+
+def test_a_soft_margin_no_candidate_keeps_falls_back_to_the_collision_free_choice():
+    world, state = _beside_the_route()
+    plain = LookaheadTeacher(None).decide(world, state)
+    huge = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(human=5.0, wall=5.0)))
+    d = huge.decide(world, state)
+    assert d.index == plain.index >= 0  # unlike the hard margin, it never leaves it stopped
+    np.testing.assert_array_equal(d.command, plain.command)
+
+
+def test_a_soft_wall_margin_keeps_the_choice_off_the_walls():
+    world = room_world(3.0, 3.0)
+    # heading along a wall, 0.15 m off it (surface): the plain teacher may hug it
+    state = make_state((0.0, 2.55, 0.0), goal=(2.5, 2.55))
+    plain = LookaheadTeacher(None)
+    ro = _rollout_of(plain, world, state)
+    soft = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(wall=0.1)))
+    d = soft.decide(world, state)
+    keep = ~ro.collided & (ro.min_wall_gap >= 0.1)
+    assert keep.any()
+    assert ro.min_wall_gap[d.index] >= 0.1
+    assert d.index == int(np.argmax(np.where(keep, plain.scores(world, state), -np.inf)))
+
+
+def test_make_teacher_passes_its_soft_margins():
+    t = make_teacher("hr-rl", density=False, human_margin=0.1, wall_margin=0.05)
+    assert t.config.margins == SoftMargins(human=0.1, wall=0.05)
+    with pytest.raises(ConfigError, match="human"):
+        SoftMargins(human=-0.1)
 
 
 # --------------------------------------------------------------------------------------------

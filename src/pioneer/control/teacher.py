@@ -10,7 +10,9 @@ with the rule terms and adaptive weights of :mod:`pioneer.reward.rules`. The bes
 is smoothed: u_t = α_EMA u* + (1 − α_EMA) u_{t−1}, α_EMA = 0.5.
 
 Additions to the paper (docs/teacher.md): a candidate predicted to collide (or to come closer
-than ``safety_margin``) is infeasible; if none is feasible the teacher stops at once
+than ``safety_margin``) is infeasible; among the feasible ones, those that keep the soft
+margins (``margins``: a gap to people and to walls) are preferred when any exists, else the
+teacher chooses among all feasible ones. If none is feasible the teacher stops at once
 (v = ω = 0, no smoothing) — unless standing still is predicted to be run into as well
 (``fallback="evade"``, the default): then it drives the candidate whose predicted collision
 comes latest. An optional ``extra_score`` hook adds a scenario-specific term (the courteous
@@ -27,6 +29,7 @@ import numpy as np
 from annotated_types import Interval
 from numpy.typing import NDArray
 
+from pioneer.bounds import Count, NonNegative, Positive
 from pioneer.config import Config
 from pioneer.control.rollout import HORIZON, HUMAN_MODEL, STEP, HumanModel, Rollout, rollout
 from pioneer.envs.policy import Decision
@@ -40,6 +43,7 @@ from pioneer.sim.world import State, World
 
 __all__ = [
     "LookaheadTeacher",
+    "SoftMargins",
     "TeacherConfig",
     "TeacherDecision",
     "make_teacher",
@@ -51,17 +55,28 @@ Fallback = Literal["stop", "evade"]  # what the teacher does when no candidate i
 
 
 @dataclasses.dataclass(frozen=True)
+class SoftMargins(Config):
+    """Gaps the teacher prefers to keep: among the feasible (collision-free) candidates, it
+    chooses from those predicted to keep both gaps when any does, else from all feasible ones.
+    Unlike ``TeacherConfig.safety_margin`` they never leave the teacher without a command."""
+
+    human: NonNegative = 0.0  # [m] predicted gap (surface to surface) to every person
+    wall: NonNegative = 0.0  # [m] predicted gap to every wall
+
+
+@dataclasses.dataclass(frozen=True)
 class TeacherConfig(Config):
     """Candidate set, horizon and smoothing of the lookahead teacher."""
 
     v_values: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)  # [m/s]
-    n_omega: int = 15  # ω values evenly spaced in [−ω_max, ω_max]
-    omega_max: float = OMEGA_MAX  # [rad/s]
-    horizon: float = HORIZON  # [s] T
-    dt: float = STEP  # [s] rollout step Δt
+    n_omega: Count = 15  # ω values evenly spaced in [−ω_max, ω_max]
+    omega_max: Positive = OMEGA_MAX  # [rad/s]
+    horizon: Positive = HORIZON  # [s] T
+    dt: Positive = STEP  # [s] rollout step Δt
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
-    safety_margin: float = 0.0  # [m] predicted human gap below this is infeasible
+    safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
+    margins: SoftMargins = SoftMargins()  # gaps preferred among the feasible candidates
     # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Fallback = "evade"
@@ -174,7 +189,8 @@ class LookaheadTeacher:
         return self.candidates[int(np.argmax(among))].copy()
 
     def scores(self, world: World, state: State) -> F64:
-        """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible; the
+        """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible (or, when
+        some candidate keeps the soft margins, where it does not); the
         decision is its argmax (ties: the lowest candidate index)."""
         return self._score(world, state).scored
 
@@ -188,22 +204,23 @@ class LookaheadTeacher:
         r_goal = goal_term(d_goal, d_total)
         feasible = ~ro.collided & (ro.min_gap >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
+        keep = feasible & (ro.min_gap >= cfg.margins.human) & (ro.min_wall_gap >= cfg.margins.wall)
+        chosen = keep if keep.any() else feasible  # the soft margins, where they can be kept
         # Only candidates that can be chosen are observed and scored by the density: about half
         # collide in the paper world, and the rays and the density are most of a decision's
-        # arithmetic. (Infeasible ones keep 0 for both terms; they score −∞.)
+        # arithmetic. (The others keep 0 for both terms; they score −∞.)
         r_obs = np.zeros(c)
         r_den = np.zeros(c)
-        if n_feasible:
-            obs = ro.observations(feasible)
-            r_obs[feasible] = obstacle_term(obs)
+        n_chosen = int(chosen.sum())
+        if n_chosen:
+            obs = ro.observations(chosen)
+            r_obs[chosen] = obstacle_term(obs)
             if self.density is not None and w.use_density:
-                feats = self._feature_map.from_rollout(
-                    ro.robot[feasible], obs, ro.commands[feasible]
-                )
-                r_den[feasible] = self.density(feats).reshape(n_feasible, n_l).mean(axis=1)
+                feats = self._feature_map.from_rollout(ro.robot[chosen], obs, ro.commands[chosen])
+                r_den[chosen] = self.density(feats).reshape(n_chosen, n_l).mean(axis=1)
         total, terms = combine(r_den, r_goal, r_obs, d_goal, d_total, w)
         extra = self.extra_score(ro, state, world) if self.extra_score is not None else np.zeros(c)
-        scored = np.where(feasible, total + extra, -np.inf)
+        scored = np.where(chosen, total + extra, -np.inf)
         return _Scores(
             scored, n_feasible, terms, extra, r_den, r_goal, r_obs, total + extra,
             ro.collision_step,
@@ -213,7 +230,7 @@ class LookaheadTeacher:
 class _Scores(NamedTuple):
     """Per-candidate quantities of one scoring pass (all ``(C,)``)."""
 
-    scored: F64  # total + extra, −∞ where infeasible
+    scored: F64  # total + extra, −∞ where infeasible or outside the kept soft margins
     n_feasible: int
     terms: dict[str, F64]  # weighted terms from ``combine``
     extra: F64
@@ -232,10 +249,13 @@ def make_teacher(
     obstacle: bool = True,
     human_model: HumanModel = TeacherConfig.human_model,
     fallback: Fallback = TeacherConfig.fallback,
+    human_margin: float = SoftMargins.human,
+    wall_margin: float = SoftMargins.wall,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
-    the shipped demos; each term can be switched off (paper Table II)."""
+    the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
+    ``wall_margin`` are its soft margins [m] (:class:`SoftMargins`)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -248,6 +268,7 @@ def make_teacher(
     cfg = TeacherConfig(
         human_model=human_model,
         fallback=fallback,
+        margins=SoftMargins(human=human_margin, wall=wall_margin),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)

@@ -12,9 +12,13 @@ from numpy.typing import NDArray
 
 from pioneer.imitation.store import file_version, save_episode
 
-__all__ = ["clear_cache", "collect_episode", "collect_task"]
+__all__ = ["CollectTask", "Margins", "clear_cache", "collect_episode", "collect_task"]
 
-_CACHE: dict[tuple[str, str], Any] = {}
+_CACHE: dict[tuple[Any, ...], Any] = {}
+Margins = tuple[float, float]  # the teacher's soft margins [m]: to people, to walls
+# One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
+# env seed, output path, label_prev, the teacher's soft margins.
+CollectTask = tuple[str, str, str | None, int, str, str, Margins]
 
 
 def clear_cache() -> None:
@@ -22,14 +26,15 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _teacher(scenario: str, reward: str) -> Any:
+def _teacher(scenario: str, reward: str, margins: Margins) -> Any:
     # One teacher per reward file: it plans from the privileged state and world of each step,
     # so the variants of a layout distribution that share a reward share the teacher.
-    key = ("teacher", reward)
+    key = ("teacher", reward, *margins)
     if key not in _CACHE:
         from pioneer.control.teacher import make_teacher
 
-        _CACHE[key] = make_teacher(scenario, reward=reward)
+        human, wall = margins
+        _CACHE[key] = make_teacher(scenario, reward=reward, human_margin=human, wall_margin=wall)
     return _CACHE[key]
 
 
@@ -75,15 +80,17 @@ def collect_episode(
     checkpoint: str | None,
     env_seed: int,
     label_prev: str,
+    margins: Margins,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
     labels), ``applied (T, 2)``, ``gap (T,)`` (surface to surface, at decision time), ``aleatoric``,
-    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome."""
+    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome.
+    ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`)."""
     from pioneer.envs.env import NavEnv
     from pioneer.envs.episode import Episode, Step
 
-    teacher = _teacher(scenario, reward)
+    teacher = _teacher(scenario, reward, margins)
     student = _student(checkpoint) if checkpoint is not None else None
     driver = _Labelled(teacher, student, label_prev)
     rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
@@ -116,8 +123,9 @@ def collect_episode(
     }
 
 
-def collect_task(args: tuple[str, str, str | None, int, str, str]) -> str:
+def collect_task(args: CollectTask) -> str:
     """Collect one episode (:func:`collect_episode`) and write it to its path: the
     :class:`pioneer.imitation.rounds.Collector` function of DAgger's students."""
-    scenario, reward, checkpoint, env_seed, path, label_prev = args
-    return save_episode(path, collect_episode(scenario, reward, checkpoint, env_seed, label_prev))
+    scenario, reward, checkpoint, env_seed, path, label_prev, margins = args
+    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev, margins)
+    return save_episode(path, ep)

@@ -55,6 +55,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegativeInt, Positive
 from pioneer.config import Config
+from pioneer.control.teacher import SoftMargins
 from pioneer.data import base_scenario
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
@@ -62,7 +63,7 @@ from pioneer.imitation.rounds import one_thread as _worker_init
 from pioneer.imitation.store import RunFolder
 from pioneer.interrupt import kept
 from pioneer.io import atomic_path, inside, output_dir_kind, run_lock, to_json, write_text_atomic
-from pioneer.learn.collect import clear_cache, collect_episode
+from pioneer.learn.collect import CollectTask, clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.models import (
     MDN,
@@ -104,6 +105,7 @@ class DaggerConfig(Config):
     # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
     # labels). Equal on teacher-driven steps.
     label_prev: LabelPrev = "applied"
+    margins: SoftMargins = SoftMargins()  # the teacher's soft margins while it labels
     teacher_episodes: Count = 50  # round 0, driven by the teacher
     rounds: NonNegativeInt = 10  # student-driven rounds after round 0
     episodes_per_round: Count = 50  # episodes of every later round
@@ -315,14 +317,13 @@ class _Students:
     cfg: DaggerConfig
     rewards: dict[str, Path]  # the teacher's reward file per scenario
 
-    def task(
-        self, rnd: int, index: int, path: Path, driver: Path | None
-    ) -> tuple[str, str, str | None, int, str, str]:
+    def task(self, rnd: int, index: int, path: Path, driver: Path | None) -> CollectTask:
         cfg = self.cfg
         name = _episode_scenario(cfg, sorted(self.rewards), rnd, index)
         seed = dagger_seed(cfg.scenario, cfg.seed, rnd, index)
         ckpt = None if driver is None else str(driver)
-        return (name, str(self.rewards[name]), ckpt, seed, str(path), str(cfg.label_prev))
+        margins = (cfg.margins.human, cfg.margins.wall)
+        return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, margins)
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
         obs = np.concatenate([e["obs"] for e in episodes]).astype(np.float32)
