@@ -5,6 +5,7 @@ written. ``pioneer eval --metrics`` chooses the tables printed."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -122,7 +123,18 @@ def test_an_unknown_metric_set_is_refused(run, capsys):
 
 
 def test_the_summary_line_shows_no_time_without_a_success(run, capsys):
-    """The go-to-goal robot collides in every episode: TT and PL (over successes) are "–"."""
+    """The go-to-goal robot collides in every episode: TT and PL (over successes) are
+    not available, said once."""
     assert main(["summarize", str(run)]) == 0
     line = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("static/goal:")]
-    assert len(line) == 1 and line[0].startswith("static/goal: SR 0.0%  TT –  PL –  (")
+    assert len(line) == 1
+    assert line[0].startswith("static/goal: SR 0.0%  TT, PL n/a (no successes)  (")
+
+
+def test_the_summary_line_shows_time_and_length_of_the_successes(run, capsys):
+    assert main(["summarize", str(run)]) == 0
+    line = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("static/teacher:")]
+    assert len(line) == 1
+    assert re.fullmatch(
+        r"static/teacher: SR 100\.0%  TT \d+\.\d\d s  PL \d+\.\d\d m  \(1 episodes\)", line[0]
+    )

@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from pioneer.cli import main
+from pioneer.data import shipped_student
 from pioneer.errors import ConfigError
 from pioneer.experiments.blind_sector import run_blind_sector_study, scanner_message
+from pioneer.io import file_sha256
 from pioneer.seeds import VALIDATION_BASE, validation_seed
 
 
@@ -31,6 +33,25 @@ def test_study_runs_every_variant_on_validation_seeds(tmp_path):
     assert all(VALIDATION_BASE <= r["seed"] < 2 * VALIDATION_BASE for r in lines)
     with pytest.raises(ConfigError):
         run_blind_sector_study(tmp_path, ["hr-rl-compact"], 1, 270.0, ["guess"])
+
+
+def test_every_record_names_what_drove_it(tmp_path):
+    """Like the evaluation's records: made_by with the parameters and the files' hashes."""
+    run_blind_sector_study(tmp_path, ["hr-rl-compact"], 1, 270.0, ["obstacle", "max_range"])
+    lines = [json.loads(x) for x in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    made = [r["made_by"] for r in lines]
+    assert {m["policy"] for m in made} == {"pioneer.experiments.blind_sector:ScannerPolicy"}
+    assert [m["params"]["fov_rad"] for m in made] == pytest.approx(
+        [2 * math.pi, math.radians(270), math.radians(270)]
+    )
+    assert [m["params"]["runtime"]["unseen"] for m in made] == ["obstacle", "obstacle", "max_range"]
+    student = shipped_student("hr-rl-compact")
+    onnx = tmp_path / "hr-rl-compact.onnx"
+    for m in made:
+        assert m["files"] == {
+            "checkpoint": {"path": str(student), "sha256": file_sha256(student)},
+            "model": {"path": str(onnx), "sha256": file_sha256(onnx)},
+        }
 
 
 def test_scanner_message_fields_of_view():

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pioneer.cli import main
-from pioneer.eval.harness import episode_seed
+from pioneer.eval.harness import PolicySpec, episode_seed, made_by
 from pioneer.experiments.calibration import BANDS, _humans_alone, _path_distance, calibrate
 from pioneer.io import to_json
 from pioneer.seeds import TRAINING_BASE, VALIDATION_BASE, training_seed, validation_seed
@@ -81,8 +81,10 @@ def test_calibrate_writes_every_statistic(tmp_path):
     assert set(st_["within_band"]) == set(BANDS)
     assert 0.0 <= st_["teacher_risky_frame_share"] <= st_["teacher_risky_frame_share_gap"] <= 1.0
     assert data["driver"] == "goal" and data["paper"]["hr-rl"]["teacher_path_length_m"] == 3.74
-    rows = (tmp_path / "episodes.jsonl").read_text().splitlines()
-    assert len(rows) == 2 and all(json.loads(r)["seed"] >= VALIDATION_BASE for r in rows)
+    rows = [json.loads(r) for r in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    assert len(rows) == 2 and all(r["seed"] >= VALIDATION_BASE for r in rows)
+    # each row names its driver as the evaluation's records do
+    assert all(r["made_by"] == made_by(PolicySpec.make("goal"), "hr-rl") for r in rows)
 
 
 def test_calibrate_is_reproducible(tmp_path):

@@ -10,7 +10,15 @@ import pytest
 from pioneer.cli import main
 from pioneer.eval.harness import read_records
 from pioneer.eval.metrics import RANGES
-from pioneer.experiments.reproduce import BASELINES, CLASSIC, SCENARIOS, SHIELD, STUDENTS, TEACHERS
+from pioneer.experiments.reproduce import (
+    BASELINES,
+    CLASSIC,
+    SCENARIOS,
+    SHIELD,
+    STUDENTS,
+    TEACHERS,
+    UNCERTAINTY_KEY,
+)
 
 
 @pytest.fixture(scope="module")
@@ -18,6 +26,11 @@ def smoke(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("reproduce") / "smoke"
     assert main(["reproduce", "--profile", "smoke", "--out", str(out), "--workers", "2"]) == 0
     return out
+
+
+def test_the_uncertainty_key_names_the_paper_threshold() -> None:
+    # uncertainty.json files already written are read by this key: it must not drift
+    assert UNCERTAINTY_KEY == "threshold_0.8m"
 
 
 def test_every_row_is_evaluated_once(smoke: Path) -> None:
@@ -38,9 +51,9 @@ def test_the_report_has_tables_i_to_iv_and_its_figures(smoke: Path) -> None:
     for row in ("crowdnav++", "cvar-bf", "student-mdn", "student-mlp", SHIELD):
         assert f"| {row}" in index or f"{row} |" in index
     unc = json.loads((smoke / "uncertainty.json").read_text())
-    assert set(unc["threshold_0.8m"]) == set(SCENARIOS)
+    assert set(unc[UNCERTAINTY_KEY]) == set(SCENARIOS)
     for sc in SCENARIOS:
-        r = unc["threshold_0.8m"][sc]
+        r = unc[UNCERTAINTY_KEY][sc]
         assert r["frames_safe"] + r["frames_risky"] > 0
     for fig in ("static_study.png", "uncertainty_safe_risky.png", "hr-rl-teacher.gif"):
         assert (smoke / "figures" / fig).stat().st_size > 0

@@ -270,18 +270,17 @@ class Eval:
 
 
 def _print_rows(summary: Mapping[str, Mapping[str, Any]]) -> None:
-    """One line per row: SR, TT, PL and the episodes (TT and PL are over successes: "–"
-    without any)."""
+    """One line per row: SR, TT, PL and the episodes. TT and PL are means over successes; a
+    row without any says so once: ``TT, PL n/a (no successes)``."""
 
     def value(x: float | None, unit: str) -> str:
-        return f"{x:.2f} {unit}" if x is not None and math.isfinite(x) else "–"
+        return f"{x:.2f} {unit}" if x is not None and math.isfinite(x) else "n/a"
 
     for key, s in summary.items():
-        print(
-            f"{key}: SR {s['success_rate']['mean']:.1f}%  "
-            f"TT {value(s['time_mean_s']['mean'], 's')}  "
-            f"PL {value(s['path_length_mean_m']['mean'], 'm')}  ({s['episodes']} episodes)"
-        )
+        tt = value(s["time_mean_s"]["mean"], "s")
+        pl = value(s["path_length_mean_m"]["mean"], "m")
+        means = "TT, PL n/a (no successes)" if tt == pl == "n/a" else f"TT {tt}  PL {pl}"
+        print(f"{key}: SR {s['success_rate']['mean']:.1f}%  {means}  ({s['episodes']} episodes)")
 
 
 @dataclasses.dataclass(frozen=True)

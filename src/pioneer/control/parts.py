@@ -20,8 +20,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from pioneer.data import DEFAULT_STUDENT_KIND, shipped_crowdnav_weights, shipped_student
 from pioneer.data import parts as shipped
-from pioneer.data import shipped_crowdnav_weights, shipped_student
 
 __all__ = [
     "check_shield",
@@ -77,7 +77,7 @@ def student_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
     """Without ``checkpoint``, the shipped student of its kind."""
     if params.get("checkpoint"):
         return {}
-    kind = str(params.get("kind") or "mdn")
+    kind = str(params.get("kind") or DEFAULT_STUDENT_KIND)
     return {"checkpoint": shipped_student(scenario, kind, bool(params.get("general")))}
 
 

@@ -9,6 +9,7 @@ from pioneer.errors import DataError, expect
 
 __all__ = [
     "CROWDNAV_VARIANTS",
+    "DEFAULT_STUDENT_KIND",
     "EPISODE_TIMES",
     "base_scenario",
     "shipped_crowdnav_weights",
@@ -22,6 +23,8 @@ BASELINES_DIR = Path(__file__).parent / "baselines"
 # Seconds per episode of every policy on the reference machine, read by `pioneer reproduce`
 # for its expected time and written by benchmarks/episode_times.py (docs/performance.md).
 EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
+# The shipped student a policy loads when not told which kind: the paper's MDN (§V-B.2).
+DEFAULT_STUDENT_KIND = "mdn"
 
 
 def base_scenario(scenario: str) -> str:
@@ -49,7 +52,7 @@ def shipped_demos(scenario: str) -> Path:
     return p
 
 
-def shipped_student(scenario: str, kind: str = "mdn", general: bool = False) -> Path:
+def shipped_student(scenario: str, kind: str = DEFAULT_STUDENT_KIND, general: bool = False) -> Path:
     """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``;
     ``general``: the one student for many worlds (``general-KIND``), whatever the scenario."""
     stem = f"general-{kind}" if general else f"{base_scenario(scenario)}-{kind}"

@@ -10,7 +10,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from pioneer.data import shipped_crowdnav_weights, shipped_demos, shipped_student
+from pioneer.data import (
+    DEFAULT_STUDENT_KIND,
+    shipped_crowdnav_weights,
+    shipped_demos,
+    shipped_student,
+)
 
 __all__ = ["crowdnav", "shield", "student", "teacher"]
 
@@ -24,7 +29,8 @@ def teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
 def student(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
     if not kwargs.get("checkpoint"):
-        shipped_student(scenario, str(kwargs.get("kind", "mdn")), bool(kwargs.get("general")))
+        kind = str(kwargs.get("kind", DEFAULT_STUDENT_KIND))
+        shipped_student(scenario, kind, bool(kwargs.get("general")))
 
 
 def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:

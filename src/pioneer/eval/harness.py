@@ -65,7 +65,16 @@ from pioneer.progress import progress_bar
 from pioneer.seeds import SEED_SETS
 from pioneer.seeds import episode_seed as _seed_of
 
-__all__ = ["PolicySpec", "Task", "episode_seed", "evaluate", "read_records", "run_task"]
+__all__ = [
+    "PolicySpec",
+    "Task",
+    "episode_seed",
+    "evaluate",
+    "made_by",
+    "made_by_record",
+    "read_records",
+    "run_task",
+]
 
 EPISODES_FILE = "episodes.jsonl"
 SCENARIOS_FILE = "scenarios.json"
@@ -206,13 +215,22 @@ def made_by(spec: PolicySpec, scenario: str) -> dict[str, Any]:
     """What makes ``spec``'s row in ``scenario``, as JSON data: its resolved parameters and the
     files it loads (hashed now), with the scenario file of a variant."""
     from pioneer.control.registry import resolve_policy
+
+    return made_by_record(resolve_policy(spec.name, scenario, dict(spec.kwargs)), scenario)
+
+
+def made_by_record(made: Mapping[str, Any], scenario: str) -> dict[str, Any]:
+    """A record's ``made_by`` from ``made`` = ``{"policy", "params", "files"}`` (as
+    :func:`pioneer.control.registry.resolve_policy` gives it, or the same for a policy built
+    outside the registry, the files as :func:`pioneer.io.file_record`): with the scenario file
+    of a variant added, as JSON data exactly as it reads back from a file."""
     from pioneer.sim.scenarios import scenario_source
 
-    made = resolve_policy(spec.name, scenario, dict(spec.kwargs))
+    out = {**made, "files": dict(made["files"])}
     source = scenario_source(scenario)
     if source is not None:
-        made["files"]["scenario_file"] = file_record(source)
-    return dict(json.loads(to_json(made)))  # exactly as it reads back from a file
+        out["files"]["scenario_file"] = file_record(source)
+    return dict(json.loads(to_json(out)))
 
 
 def _worker_init() -> None:

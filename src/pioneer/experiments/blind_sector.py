@@ -8,7 +8,9 @@ hands it to :meth:`StudentRuntime.step <pioneer.deploy.runtime.StudentRuntime.st
 rule under test — the resampling, the fill, the scan health and the clipping are exactly the
 robot's. The student is the shipped MDN of the scenario, exported to ONNX. Episodes use
 validation seeds (:func:`pioneer.seeds.validation_seed`, purpose ``"blind-sector"``): this
-study chooses a default.
+study chooses a default. Each record of ``episodes.jsonl`` names what drove it in ``made_by``,
+as the evaluation's records do (:func:`pioneer.eval.harness.made_by_record`): the scanner's
+field of view, the runtime's settings, and the hashes of the student and its ONNX export.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from pioneer.data import shipped_student
 from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import run_episode
-from pioneer.io import atomic_path, inside, output_dir, to_json
+from pioneer.eval.harness import made_by_record
+from pioneer.io import atomic_path, file_record, inside, output_dir, to_json
 from pioneer.laser import UNSEEN_RULES, UnseenRule
 from pioneer.learn.export import export_onnx
 from pioneer.learn.models import load_student
@@ -97,6 +100,18 @@ class ScannerPolicy:
         return np.array([d.v, d.omega])
 
 
+def _made_by(
+    scenario: str, student: Path, onnx: Path, fov_rad: float, config: RuntimeConfig
+) -> dict[str, Any]:
+    """A record's ``made_by`` for the :class:`ScannerPolicy` of one variant."""
+    made = {
+        "policy": f"{__name__}:{ScannerPolicy.__name__}",
+        "params": {"fov_rad": fov_rad, "runtime": config.to_dict()},
+        "files": {"checkpoint": file_record(student), "model": file_record(onnx)},
+    }
+    return made_by_record(made, scenario)
+
+
 def _variants(fov_deg: float, rules: Sequence[UnseenRule]) -> list[tuple[str, float, UnseenRule]]:
     """``(label, fov [rad], rule)``: the full scanner (reference), then each rule at fov."""
     out = [("360°", 2.0 * math.pi, rules[0])]
@@ -134,8 +149,10 @@ def run_blind_sector_study(
         onnx = export_onnx(load_student(students[scenario]), inside(out, f"{scenario}.onnx"))
         summary[scenario] = {}
         for label, fov, rule in _variants(fov_deg, rules):
-            rt = StudentRuntime(onnx, config=RuntimeConfig(unseen=rule))
+            config = RuntimeConfig(unseen=rule)
+            rt = StudentRuntime(onnx, config=config)
             policy = ScannerPolicy(rt, fov, f"student-onnx {label}")
+            made = _made_by(scenario, students[scenario], onnx, fov, config)
             events = {"success": 0, "collision": 0, "timeout": 0}
             stops: dict[str, int] = {}
             for k in range(episodes):
@@ -144,7 +161,8 @@ def run_blind_sector_study(
                 events[rec.event] += 1
                 for reason, c in policy.stops.items():
                     stops[reason] = stops.get(reason, 0) + c
-                lines.append(to_json({"variant": label, **rec.to_dict(), "stops": policy.stops}))
+                row = {"variant": label, **rec.to_dict(), "stops": policy.stops, "made_by": made}
+                lines.append(to_json(row))
             lo, hi = wilson_interval(events["success"], episodes)
             summary[scenario][label] = {
                 "n": episodes,

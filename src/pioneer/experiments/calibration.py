@@ -22,6 +22,10 @@ Statistics per scenario (the keys of ``calibration.json``):
 - ``careless_collision_share``: share of careless episodes that end in a collision;
 - ``human_deflection_m``: per episode the largest distance of a human, while the teacher
   drives, from the path the same human walks without a robot; the mean over episodes.
+
+Each row of ``episodes.jsonl`` names what drove it in ``made_by``, as the evaluation's records
+do (:func:`pioneer.eval.harness.made_by`: the driver's resolved parameters and the hashes of
+the files it loads).
 """
 
 from __future__ import annotations
@@ -208,6 +212,7 @@ def calibrate(
     write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
     policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
     from pioneer.control.registry import check_parts, policy_factory
+    from pioneer.eval.harness import PolicySpec, made_by
     from pioneer.sim.scenarios import get_scenario, pin_scenario
 
     if episodes < 1:
@@ -217,6 +222,7 @@ def calibrate(
     policy_factory(driver)  # an unknown driver fails here, at once
     for s in names:  # and one without its parts in a scenario (a student without a shipped one)
         check_parts(driver, s, {})
+    made = {s: made_by(PolicySpec.make(driver), s) for s in names}  # files hashed before use
     tasks = [
         (s, validation_seed("calibrate", s, k), driver) for s in names for k in range(episodes)
     ]
@@ -241,5 +247,6 @@ def calibrate(
     result["elapsed_s"] = time.perf_counter() - t0
     if out is not None:
         write_text_atomic(out / "calibration.json", to_json(result, indent=2))
-        write_text_atomic(out / "episodes.jsonl", "".join(to_json(r) + "\n" for r in rows))
+        lines = [to_json({**r, "made_by": made[r["scenario"]]}) + "\n" for r in rows]
+        write_text_atomic(out / "episodes.jsonl", "".join(lines))
     return result

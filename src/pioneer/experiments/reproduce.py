@@ -37,6 +37,7 @@ from pioneer.parallel import worker_count
 __all__ = [
     "PAPER_ROWS",
     "PROFILES",
+    "UNCERTAINTY_KEY",
     "EpisodeTimes",
     "Profile",
     "episode_times",
@@ -68,6 +69,8 @@ SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teach
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
+# uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
+UNCERTAINTY_KEY = f"threshold_{RISKY_DISTANCE_M:g}m"
 
 EPISODE_TIMES_FORMAT = "pioneer.episode-times/1"
 
@@ -397,7 +400,7 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         return ""
     write_text_atomic(
         out / "uncertainty.json",
-        to_json({"threshold_0.8m": results, "paper_risky_share": matched}, indent=2),
+        to_json({UNCERTAINTY_KEY: results, "paper_risky_share": matched}, indent=2),
     )
     plot_uncertainty_histogram(
         hist, out / "figures" / "uncertainty_safe_risky.png", "MDN student: safe vs risky frames"

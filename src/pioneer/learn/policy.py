@@ -85,13 +85,13 @@ def make_student_policy(
     worker per core); ``None`` leaves it.
     """
     if checkpoint is None:
-        from pioneer.data import shipped_student
+        from pioneer.data import DEFAULT_STUDENT_KIND, shipped_student
 
         if scenario is None and not general:
             raise ConfigError(
                 expect("student policy", "checkpoint=PATH or a scenario", None, "pass one")
             )
-        checkpoint = shipped_student(scenario or "", kind or "mdn", general=general)
+        checkpoint = shipped_student(scenario or "", kind or DEFAULT_STUDENT_KIND, general=general)
     path = str(checkpoint).format(scenario=scenario) if scenario is not None else str(checkpoint)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))

@@ -8,29 +8,18 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pioneer.io import atomic_path
 from pioneer.sim.humans import GONE
 from pioneer.sim.world import State, World
+from pioneer.viz._figure import pyplot, save_figure
 
 __all__ = ["plot_learning_curve", "plot_trajectory"]
-
-
-def _pyplot():  # type: ignore[no-untyped-def]
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:  # pragma: no cover - matplotlib is a core dependency
-        raise ImportError("plotting needs matplotlib: pip install matplotlib") from exc
-    return plt
 
 
 def plot_trajectory(
     world: World, states: list[State], path: str | os.PathLike[str], title: str = ""
 ) -> None:
     """Plot the robot's and the humans' paths of one episode into a PNG (atomically)."""
-    plt = _pyplot()
+    plt = pyplot()
     robot = np.stack([s.robot[0] for s in states])
     humans = np.stack([s.h_pos[0] for s in states])
     present = np.stack([s.h_status[0] != GONE for s in states])
@@ -54,10 +43,7 @@ def plot_trajectory(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_learning_curve(
@@ -69,7 +55,7 @@ def plot_learning_curve(
     ``mean_return``; optional ``success_rate``, ``collision_rate``, ``timeout_rate`` (fractions
     in [0, 1]) go to a second panel. NaN entries (no finished episode yet) are skipped.
     """
-    plt = _pyplot()
+    plt = pyplot()
     x = np.asarray(curve["env_steps"], dtype=np.float64)
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 5), dpi=120, sharex=True)
     ax1.plot(x, np.asarray(curve["mean_return"], dtype=np.float64), color="tab:blue")
@@ -87,7 +73,4 @@ def plot_learning_curve(
     ax2.grid(alpha=0.3)
     if title:
         ax1.set_title(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, path)

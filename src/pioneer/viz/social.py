@@ -10,9 +10,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pioneer.io import atomic_path
 from pioneer.sim.world import World
-from pioneer.viz.plots import _pyplot
+from pioneer.viz._figure import pyplot, save_figure
 
 __all__ = ["plot_clearance_distribution", "plot_occupancy"]
 
@@ -33,7 +32,7 @@ def plot_clearance_distribution(
     ``zones`` (name, low, high) [m] are shaded behind, e.g. Hall's proxemic zones, and the
     clearance at ``contact`` [m] (the robot's radius: gap 0) is a dashed line. Under each
     name, the share of its steps below the second zone's upper bound. PNG, atomic."""
-    plt = _pyplot()
+    plt = pyplot()
     n_pol = max((len(p) for p in panels.values()), default=1)
     fig, axes = plt.subplots(
         len(panels), 1, figsize=(max(6.0, 0.75 * n_pol + 1.5), 3.2 * len(panels)), squeeze=False
@@ -70,12 +69,7 @@ def plot_clearance_distribution(
         ax.set_ylabel("nearest person: clearance [m]")
         ax.set_title(scenario, fontsize=9)
         ax.grid(alpha=0.3, axis="y")
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, title=title, dpi=110)
 
 
 def plot_occupancy(
@@ -90,7 +84,7 @@ def plot_occupancy(
     each ``cell`` × ``cell`` square [m] (``positions[policy]`` = robot x, y of every step of
     every episode, shape ``(K, 2)``), log colour scale shared by the panels, walls drawn. PNG,
     atomic."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.colors import LogNorm
 
     xmin, xmax, ymin, ymax = (float(b) for b in world.bounds)
@@ -138,8 +132,4 @@ def plot_occupancy(
     if image is not None:
         bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.6, aspect=30)
         bar.set_label(f"share of the policy's steps per {100 * cell:.0f} cm cell", fontsize=8)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, title=title, dpi=110, tight=False)  # constrained layout

@@ -9,8 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.io import atomic_path
-from pioneer.viz.plots import _pyplot
+from pioneer.viz._figure import pyplot, save_figure
 
 __all__ = ["plot_dagger_curves", "plot_uncertainty_histogram"]
 
@@ -18,7 +17,7 @@ __all__ = ["plot_dagger_curves", "plot_uncertainty_histogram"]
 def plot_dagger_curves(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[str]) -> None:
     """Loss (training, and on each round's new frames before training on them) and the success
     rate of the episodes each round collected, against the DAgger round (PNG, atomic)."""
-    plt = _pyplot()
+    plt = pyplot()
     rnd = np.array([int(r["round"]) for r in rows])
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.4))
     train = np.array([float(r["train_loss"]) for r in rows])
@@ -39,10 +38,7 @@ def plot_dagger_curves(rows: Sequence[Mapping[str, Any]], path: str | os.PathLik
     ax2.set_ylabel("success of the round's episodes [%]")
     ax2.set_xticks(rnd)
     ax2.grid(alpha=0.3, axis="y")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def plot_uncertainty_histogram(
@@ -55,7 +51,7 @@ def plot_uncertainty_histogram(
     ``groups[label][cls]`` holds one uncertainty array per class (``"safe"``, ``"risky"``);
     one panel per label (e.g. ``"hr-rl aleatoric"``), log-scaled x axis.
     """
-    plt = _pyplot()
+    plt = pyplot()
     n = len(groups)
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.3), squeeze=False)
     for ax, (label, by_cls) in zip(axes[0], groups.items(), strict=True):
@@ -84,9 +80,4 @@ def plot_uncertainty_histogram(
         ax.set_xlabel("uncertainty [(m/s)² + (rad/s)²]")
         ax.set_ylabel("share of the class's frames")
         ax.legend(fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, title=title, dpi=110)

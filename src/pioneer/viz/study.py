@@ -7,8 +7,8 @@ import os
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.io import atomic_path
 from pioneer.sim.world import World
+from pioneer.viz._figure import pyplot, save_figure
 
 __all__ = ["plot_static_study"]
 
@@ -26,9 +26,7 @@ def plot_static_study(
     path: str | os.PathLike[str],
 ) -> None:
     """Three panels of reward maps over (x, y); demos on (a, b), trajectories on (c)."""
-    from pioneer.viz.plots import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(maps), figsize=(4.2 * len(maps), 5.2), dpi=120)
     for k, (ax, (title, z)) in enumerate(zip(np.atleast_1d(axes), maps, strict=True)):
         lim = float(np.max(np.abs(z))) or 1.0
@@ -52,7 +50,4 @@ def plot_static_study(
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
     np.atleast_1d(axes)[0].set_ylabel("y [m]")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
