@@ -95,10 +95,27 @@ __all__ = [
     "RuntimeDecision",
     "StudentRuntime",
     "make_onnx_student_policy",
+    "previous_commands",
+    "student_inputs",
 ]
 
 ONNX_FORMAT = "pioneer.student-onnx/1"  # written by pioneer.learn.export.export_onnx
 STOP_REASONS = ("invalid", "sparse", "stale", "action")  # in the order they are checked
+
+
+def student_inputs(
+    obs: NDArray[np.floating], previous: NDArray[np.floating] | None
+) -> NDArray[np.float32]:
+    """A student's inputs ``(N, obs_dim [+ 2])`` float32: the observations ``(N, obs_dim)``,
+    followed by u_{t−1}, the command sent at the previous step ``(N, 2)``, for a student trained
+    with ``previous_command`` (``previous=None``: the observation alone). One function for
+    training (:mod:`pioneer.learn.dagger`), the torch student and this runtime, so all three
+    build the same inputs."""
+    x = np.asarray(obs, dtype=np.float32)
+    if previous is None:
+        return np.ascontiguousarray(x)
+    u = np.asarray(previous, dtype=np.float32).reshape(x.shape[0], 2)
+    return np.ascontiguousarray(np.concatenate([x, u], axis=1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,6 +148,21 @@ class RuntimeConfig(Config):
             raise ConfigError(
                 expect("RuntimeConfig.v_min", f"<= v_max={self.v_max}", self.v_min, "lower v_min")
             )
+
+
+def previous_commands(
+    sent: NDArray[np.floating], limits: RuntimeConfig | None = None
+) -> NDArray[np.float32]:
+    """u_{t−1} of every step of one episode ``(T, 2)`` from the commands chosen at each step
+    ``sent (T, 2)``: zeros at the start, then the previous step's command clipped to the
+    command limits (``limits``, default :class:`RuntimeConfig`'s: what the robot ran, as
+    :class:`StudentRuntime` sends it)."""
+    cfg = limits or RuntimeConfig()
+    u = np.asarray(sent, dtype=np.float64).reshape(-1, 2)
+    lo, hi = np.array([cfg.v_min, -cfg.omega_max]), np.array([cfg.v_max, cfg.omega_max])
+    out = np.zeros_like(u)
+    out[1:] = np.clip(u[:-1], lo, hi)
+    return out.astype(np.float32)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -209,6 +241,10 @@ class StudentRuntime:
                     "pass the LidarConfig the student was trained with",
                 )
             )
+        # a student that also reads u_{t−1}: the runtime remembers the command it last sent
+        self.previous_command = bool(self.config.get("previous_command", False))
+        self.input_dim = self.obs_dim + (2 if self.previous_command else 0)
+        self._last = np.zeros(2)
         self._check_input(p, fix)
         self.outputs = [o.name for o in self.session.get_outputs()]
         self._fetch = [n for n in ("action", "aleatoric", "epistemic") if n in self.outputs]
@@ -216,36 +252,49 @@ class StudentRuntime:
             raise DataError(expect(f"{p}: outputs", "an 'action' output", self.outputs, fix))
 
     def _check_input(self, p: Path, fix: str) -> None:
-        """The graph's input must be ``obs`` of ``(N, obs_dim)``: a graph of another width,
-        whatever its metadata says, would fail on its first decision (a named batch size
-        passes; a fixed width must be the observation's)."""
+        """The graph's input must be ``obs`` of ``(N, input_dim)`` (the observation, and u_{t−1}
+        for a student that reads it): a graph of another width, whatever its metadata says,
+        would fail on its first decision (a named batch size passes; a fixed width must be
+        the inputs')."""
         inputs = {i.name: list(i.shape) for i in self.session.get_inputs()}
         shape = inputs.get("obs")
         if shape is None:
             raise DataError(expect(f"{p}: inputs", "one named 'obs'", sorted(inputs), fix))
         width = shape[-1] if len(shape) == 2 else None
-        if len(shape) != 2 or (isinstance(width, int) and width != self.obs_dim):
+        if len(shape) != 2 or (isinstance(width, int) and width != self.input_dim):
             raise DataError(
                 expect(
                     f"{p}: input 'obs'",
-                    f"shape (N, {self.obs_dim}) (the {self.obs_dim}-D observation)",
+                    f"shape (N, {self.input_dim}) (the {self.input_dim}-D inputs)",
                     f"shape {tuple(shape)}",
                     "export the student trained on this observation (pioneer export)",
                 )
             )
 
+    def reset(self) -> None:
+        """Start an episode: forget the last command sent (u_{t−1} = 0 at the first decision)."""
+        self._last = np.zeros(2)
+
     def raw_outputs(
-        self, obs: NDArray[np.floating]
+        self, obs: NDArray[np.floating], previous: NDArray[np.floating] | None = None
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
-        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``:
-        the graph's raw outputs, for analysis (the action is not clipped;
-        :meth:`from_observation` and :meth:`step` clip it); the uncertainties are NaN for a
-        regression (MLP) student."""
-        x = np.ascontiguousarray(obs, dtype=np.float32)
-        if x.ndim != 2 or x.shape[1] != self.obs_dim:
+        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``
+        (and, for a student that reads it, u_{t−1} ``previous (N, 2)``): the graph's raw
+        outputs, for analysis (the action is not clipped; :meth:`from_observation` and
+        :meth:`step` clip it); the uncertainties are NaN for a regression (MLP) student."""
+        o = np.asarray(obs, dtype=np.float32)
+        if o.ndim != 2 or o.shape[1] != self.obs_dim:
             raise DataError(
-                expect("obs", f"shape (N, {self.obs_dim})", x.shape, "pass 29-D observations")
+                expect("obs", f"shape (N, {self.obs_dim})", o.shape, "pass 29-D observations")
             )
+        if (previous is None) == self.previous_command:
+            wanted = "u_{t−1} (N, 2)" if self.previous_command else "None"
+            fix = "pass previous" if self.previous_command else "drop previous"
+            raise DataError(expect("previous", wanted, type(previous).__name__, fix))
+        if previous is not None and np.shape(previous) != (o.shape[0], 2):
+            got = np.shape(previous)
+            raise DataError(expect("previous", f"shape ({o.shape[0]}, 2)", got, "fix it"))
+        x = student_inputs(o, previous)
         if not np.isfinite(x).all():
             raise DataError(expect("obs", "finite values", "NaN or inf", "check the scan"))
         got = self.session.run(self._fetch, {"obs": x})
@@ -258,7 +307,7 @@ class StudentRuntime:
     def from_observation(self, obs: NDArray[np.floating]) -> RuntimeDecision:
         """The decision for one observation ``(29,)``, clipped to the command limits (a
         non-finite action is a stop with reason ``"action"``); no scan, so no scan health."""
-        return self._decide(obs, math.nan, math.nan, math.nan)
+        return self._sent(self._decide(obs, math.nan, math.nan, math.nan))
 
     def step(
         self,
@@ -284,8 +333,13 @@ class StudentRuntime:
         age = math.nan if age_s is None else float(age_s)
         reason = self._scan_fault(reading, age_s)
         if reason is not None:
-            return _stop(reason, reading.valid_share, reading.coverage_rad, age)
-        return self._decide(obs, reading.valid_share, reading.coverage_rad, age)
+            return self._sent(_stop(reason, reading.valid_share, reading.coverage_rad, age))
+        return self._sent(self._decide(obs, reading.valid_share, reading.coverage_rad, age))
+
+    def _sent(self, decision: RuntimeDecision) -> RuntimeDecision:
+        """Remember the command that leaves (u_{t−1} of the next decision)."""
+        self._last = np.array([decision.v, decision.omega])
+        return decision
 
     def _scan_fault(self, reading: ScanReading, age_s: float | None) -> str | None:
         """The first of STOP_REASONS the scan has, or None."""
@@ -301,7 +355,8 @@ class StudentRuntime:
     def _decide(
         self, obs: NDArray[np.floating], valid_share: float, coverage_rad: float, age_s: float
     ) -> RuntimeDecision:
-        a, al, ep = self.raw_outputs(np.reshape(obs, (1, -1)))
+        prev = self._last.reshape(1, 2) if self.previous_command else None
+        a, al, ep = self.raw_outputs(np.reshape(obs, (1, -1)), prev)
         v, w = float(a[0, 0]), float(a[0, 1])
         if not (math.isfinite(v) and math.isfinite(w)):
             return _stop("action", valid_share, coverage_rad, age_s)
@@ -346,6 +401,7 @@ class OnnxStudentPolicy:
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Start an episode (the student is deterministic; ``rng`` is unused)."""
         self.uncertainty = []
+        self.runtime.reset()
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""

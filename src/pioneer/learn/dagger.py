@@ -57,6 +57,7 @@ from pioneer.bounds import Count, NonNegativeInt, Positive
 from pioneer.config import Config
 from pioneer.control.teacher import SoftMargins
 from pioneer.data import base_scenario
+from pioneer.deploy.runtime import previous_commands, student_inputs
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
 from pioneer.imitation.rounds import one_thread as _worker_init
@@ -326,8 +327,14 @@ class _Students:
         return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, margins)
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
-        obs = np.concatenate([e["obs"] for e in episodes]).astype(np.float32)
-        return obs, np.concatenate([e["action"] for e in episodes]).astype(np.float32)
+        """Inputs (the observation, and u_{t−1} for a ``previous_command`` student) and labels
+        of every frame."""
+        reads_prev = self.cfg.student.previous_command
+        x = [
+            student_inputs(e["obs"], previous_commands(e["applied"]) if reads_prev else None)
+            for e in episodes
+        ]
+        return np.concatenate(x), np.concatenate([e["action"] for e in episodes]).astype(np.float32)
 
     def loss(self, model: Student, data: Data) -> float:
         """``model``'s loss on frames it was not trained on (eval mode: dropout off)."""

@@ -1,7 +1,9 @@
 """ONNX export of a student, for the torch-free robot runtime (:mod:`pioneer.deploy`).
 
-The graph has one input ``obs`` (batch, obs_dim) float32 — the 29-D observation, raw (the
-standardisation is inside the graph) — and a dynamic batch axis. Outputs:
+The graph has one input ``obs`` (batch, input_dim) float32 — the 29-D observation, raw (the
+standardisation is inside the graph), followed for a student trained with
+``previous_command`` by u_{t−1} (v, ω), the command sent at the previous step
+(:func:`pioneer.deploy.runtime.student_inputs`) — and a dynamic batch axis. Outputs:
 
 - MDN: ``action`` (batch, 2) the deterministic command (v [m/s], ω [rad/s]) chosen by the
   model's ``action_mode`` (mean of the most probable component by default), ``aleatoric``
@@ -96,7 +98,7 @@ def export_onnx(
         graph, outputs = model, MLP_OUTPUTS
     was_training = model.training
     model.eval()
-    dummy = torch.zeros(2, model.config.obs_dim, dtype=torch.float32)
+    dummy = torch.zeros(2, model.config.input_dim, dtype=torch.float32)
     axes = {name: {0: "batch"} for name in ("obs", *outputs)}
     target = Path(path)
     try:

@@ -92,6 +92,14 @@ class StudentConfig(Config):
     # mixture mean ("mean"); see the module docstring
     action_mode: ActionMode = "mode"
     nll_beta: UnitInterval = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
+    # beyond the paper: the inputs also hold u_{t−1}, the command the robot sent at the
+    # previous step (2 more inputs after the observation; zeros at an episode's start)
+    previous_command: bool = False
+
+    @property
+    def input_dim(self) -> int:
+        """The network's input width: the observation, and u_{t−1} with ``previous_command``."""
+        return self.obs_dim + (ACTION_DIM if self.previous_command else 0)
 
 
 # The StudentConfig fields only an MDN uses (an MLP ignores them).
@@ -133,7 +141,7 @@ def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") ->
 class Student(nn.Module):
     """Common base: the ReLU/dropout trunk and the normalisation buffers.
 
-    Buffers (saved with the weights): ``obs_mean``/``obs_std`` (obs_dim,) standardise inputs;
+    Buffers (saved with the weights): ``obs_mean``/``obs_std`` (input_dim,) standardise inputs;
     ``act_mean``/``act_std`` (2,) map the heads' standardised outputs to physical units.
     """
 
@@ -147,13 +155,13 @@ class Student(nn.Module):
         super().__init__()
         self.config = config
         layers: list[nn.Module] = []
-        n_in = config.obs_dim
+        n_in = config.input_dim
         for width in config.hidden:
             layers += [seeded_linear(n_in, width, gen), nn.ReLU(), nn.Dropout(config.dropout)]
             n_in = width
         self.trunk = nn.Sequential(*layers)
-        self.register_buffer("obs_mean", torch.zeros(config.obs_dim))
-        self.register_buffer("obs_std", torch.ones(config.obs_dim))
+        self.register_buffer("obs_mean", torch.zeros(config.input_dim))
+        self.register_buffer("obs_std", torch.ones(config.input_dim))
         self.register_buffer("act_mean", torch.zeros(ACTION_DIM))
         self.register_buffer("act_std", torch.ones(ACTION_DIM))
         self.eval()
@@ -164,7 +172,7 @@ class Student(nn.Module):
         return self.config.kind
 
     def set_normalizer(self, obs: torch.Tensor, actions: torch.Tensor) -> None:
-        """Fit the standardisation buffers to ``obs`` (N, obs_dim) and ``actions`` (N, 2);
+        """Fit the standardisation buffers to ``obs`` (N, input_dim) and ``actions`` (N, 2);
         near-constant features (std < 1e-6) keep scale 1."""
         with torch.no_grad():
             for x, mean, std in (
@@ -176,7 +184,7 @@ class Student(nn.Module):
                 std.copy_(torch.where(s < 1e-6, torch.ones_like(s), s))
 
     def features(self, obs: torch.Tensor) -> torch.Tensor:
-        """Trunk output ``(N, hidden[-1])`` of standardised observations ``(N, obs_dim)``."""
+        """Trunk output ``(N, hidden[-1])`` of standardised inputs ``(N, input_dim)``."""
         out: torch.Tensor = self.trunk((obs - self.obs_mean) / self.obs_std)
         return out
 
@@ -192,7 +200,7 @@ class Student(nn.Module):
 class MDN(Student):
     """Mixture density network: ``forward(obs) -> (logits, mu, sigma)``.
 
-    Shapes: ``obs`` (N, obs_dim) float32; ``logits`` (N, K) unnormalised mixture log-weights;
+    Shapes: ``obs`` (N, input_dim) float32; ``logits`` (N, K) unnormalised mixture log-weights;
     ``mu`` (N, K, 2) component means and ``sigma`` (N, K, 2) component standard deviations,
     both in physical units (v [m/s], ω [rad/s]).
     """
@@ -309,7 +317,7 @@ def train_student(
     progress: Callable[[int, float], None] | None = None,
     fit_normalizer: bool = True,
 ) -> list[float]:
-    """Fit ``model`` to ``(obs (N, obs_dim), actions (N, 2))`` with Adam; returns the mean
+    """Fit ``model`` to ``(obs (N, input_dim), actions (N, 2))`` with Adam; returns the mean
     training loss of each epoch (NLL [nats] for the MDN, standardised MSE for the MLP).
 
     ``fit_normalizer`` first sets the standardisation buffers from this data (DAgger retrains
@@ -319,7 +327,7 @@ def train_student(
     caller's RNG state is left untouched. ``progress(epoch, loss)`` is called after each epoch.
     The model is left in eval mode (dropout off).
     """
-    x = _as_tensor(obs, "obs", model.config.obs_dim)
+    x = _as_tensor(obs, "obs", model.config.input_dim)
     y = _as_tensor(actions, "actions", ACTION_DIM)
     if x.shape[0] != y.shape[0]:
         raise DataError(

@@ -23,6 +23,7 @@ import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
+from pioneer.deploy.runtime import RuntimeConfig, student_inputs
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
 
@@ -35,7 +36,9 @@ class StudentPolicy:
     ``act`` returns the deterministic action (MDN: mean of the most probable component, or
     the mixture mean with ``action_mode="mean"``). ``uncertainty`` holds ``(aleatoric,
     epistemic)`` [(m/s)² + (rad/s)²] for every step of the current episode, NaN for the MLP;
-    ``reset`` clears it.
+    ``reset`` clears it. A student trained with ``previous_command`` also reads u_{t−1}: the
+    command it sent at the previous step, clipped to the robot's limits as the robot runs it
+    (zeros after ``reset``), exactly as the ONNX runtime does.
     """
 
     def __init__(
@@ -46,14 +49,21 @@ class StudentPolicy:
         self.action_mode = action_mode or model.config.action_mode
         self.checkpoint: Path | None = None  # the file it was loaded from (make_student_policy)
         self.uncertainty: list[tuple[float, float]] = []
+        limits = RuntimeConfig()
+        self._low = np.array([limits.v_min, -limits.omega_max])
+        self._high = np.array([limits.v_max, limits.omega_max])
+        self._last = np.zeros(2)
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Start an episode (the student is deterministic; ``rng`` is unused)."""
         self.uncertainty = []
+        self._last = np.zeros(2)
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""
-        x = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(1, -1))
+        o = np.asarray(obs, dtype=np.float32).reshape(1, -1)
+        prev = self._last.reshape(1, 2) if self.model.config.previous_command else None
+        x = torch.as_tensor(student_inputs(o, prev))
         with torch.inference_mode():
             if isinstance(self.model, MDN):
                 logits, mu, sigma = self.model(x)
@@ -63,7 +73,14 @@ class StudentPolicy:
             else:
                 action = self.model.deterministic_action(x)
                 self.uncertainty.append((math.nan, math.nan))
-        return action[0].numpy().astype(np.float64)
+        command = action[0].numpy().astype(np.float64)
+        self.sent(command)
+        return command
+
+    def sent(self, command: NDArray[np.floating]) -> None:
+        """Note the command the robot ran this step (u_{t−1} of the next), clipped to its
+        limits: ``act`` notes its own; a wrapper that sends another (a shield) notes that."""
+        self._last = np.clip(np.asarray(command, dtype=np.float64), self._low, self._high)
 
 
 def make_student_policy(

@@ -99,6 +99,13 @@ class ShieldPolicy:
         self.shielded.append(float(intervene))
         if not intervene:
             return u
+        sent = self._instead(u, obs, info)
+        self.student.sent(sent)  # a student reading u_{t−1} must see what the robot ran
+        return sent
+
+    def _instead(
+        self, u: NDArray[np.float64], obs: NDArray[np.float32], info: Mapping[str, Any]
+    ) -> NDArray[np.float64]:
         if self.mode == "slow":
             return np.array([u[0] * self.slow_factor, u[1]])
         assert self.fallback is not None
