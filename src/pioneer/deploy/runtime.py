@@ -90,32 +90,17 @@ from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN
 __all__ = [
     "ONNX_FORMAT",
     "STOP_REASONS",
+    "InputMemory",
     "OnnxStudentPolicy",
     "RuntimeConfig",
     "RuntimeDecision",
+    "StudentInputs",
     "StudentRuntime",
     "make_onnx_student_policy",
-    "previous_commands",
-    "student_inputs",
 ]
 
 ONNX_FORMAT = "pioneer.student-onnx/1"  # written by pioneer.learn.export.export_onnx
 STOP_REASONS = ("invalid", "sparse", "stale", "action")  # in the order they are checked
-
-
-def student_inputs(
-    obs: NDArray[np.floating], previous: NDArray[np.floating] | None
-) -> NDArray[np.float32]:
-    """A student's inputs ``(N, obs_dim [+ 2])`` float32: the observations ``(N, obs_dim)``,
-    followed by u_{t−1}, the command sent at the previous step ``(N, 2)``, for a student trained
-    with ``previous_command`` (``previous=None``: the observation alone). One function for
-    training (:mod:`pioneer.learn.dagger`), the torch student and this runtime, so all three
-    build the same inputs."""
-    x = np.asarray(obs, dtype=np.float32)
-    if previous is None:
-        return np.ascontiguousarray(x)
-    u = np.asarray(previous, dtype=np.float32).reshape(x.shape[0], 2)
-    return np.ascontiguousarray(np.concatenate([x, u], axis=1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,19 +135,110 @@ class RuntimeConfig(Config):
             )
 
 
-def previous_commands(
-    sent: NDArray[np.floating], limits: RuntimeConfig | None = None
-) -> NDArray[np.float32]:
-    """u_{t−1} of every step of one episode ``(T, 2)`` from the commands chosen at each step
-    ``sent (T, 2)``: zeros at the start, then the previous step's command clipped to the
-    command limits (``limits``, default :class:`RuntimeConfig`'s: what the robot ran, as
-    :class:`StudentRuntime` sends it)."""
+@dataclasses.dataclass(frozen=True)
+class StudentInputs:
+    """What a student reads besides the observation o_t (beyond the paper; both off by
+    default): the previous step's observation o_{t−1} (its motion: where people go, not only
+    where they are) and u_{t−1}, the command the robot sent at the previous step. Its inputs
+    are ``[o_t, o_{t−1}?, u_{t−1}?]``; at an episode's start o_{t−1} = o_t and u_{t−1} = 0.
+
+    One definition for training (:meth:`of_episode`, DAgger's aggregate), the torch student and
+    this runtime (:class:`InputMemory`, step by step), so all three build the same inputs.
+    """
+
+    previous_observation: bool = False
+    previous_command: bool = False
+
+    @classmethod
+    def of(cls, config: Mapping[str, Any]) -> StudentInputs:
+        """The inputs of a student from its config (a ``StudentConfig`` as a dict)."""
+        return cls(
+            bool(config.get("previous_observation", False)),
+            bool(config.get("previous_command", False)),
+        )
+
+    def width(self, obs_dim: int) -> int:
+        """The network's input width for an ``obs_dim``-D observation."""
+        return obs_dim * (2 if self.previous_observation else 1) + (
+            2 if self.previous_command else 0
+        )
+
+    def stack(
+        self,
+        obs: NDArray[np.floating],
+        previous_obs: NDArray[np.floating] | None = None,
+        previous_command: NDArray[np.floating] | None = None,
+    ) -> NDArray[np.float32]:
+        """``[o_t, o_{t−1}?, u_{t−1}?]`` as ``(N, width)`` float32 from ``(N, obs_dim)``
+        observations and the parts this student reads (and no others)."""
+        parts = [np.asarray(obs, dtype=np.float32)]
+        for name, used, part, cols in (
+            ("previous_obs", self.previous_observation, previous_obs, parts[0].shape[-1]),
+            ("previous_command", self.previous_command, previous_command, 2),
+        ):
+            if used != (part is not None):
+                wanted = f"an array (N, {cols})" if used else "None (this student does not read it)"
+                raise DataError(expect(name, wanted, type(part).__name__, f"pass {wanted}"))
+            if part is not None:
+                x = np.asarray(part, dtype=np.float32)
+                if x.shape != (parts[0].shape[0], cols):
+                    want = f"shape ({parts[0].shape[0]}, {cols})"
+                    raise DataError(expect(name, want, x.shape, "align it with obs"))
+                parts.append(x)
+        return np.ascontiguousarray(np.concatenate(parts, axis=1))
+
+    def of_episode(
+        self,
+        obs: NDArray[np.floating],
+        sent: NDArray[np.floating],
+        limits: RuntimeConfig | None = None,
+    ) -> NDArray[np.float32]:
+        """The inputs of every step of one episode ``(T, width)`` from its observations
+        ``(T, obs_dim)`` and the commands chosen at each step ``sent (T, 2)``, each u_{t−1}
+        clipped to the command limits (``limits``, default :class:`RuntimeConfig`'s) as the
+        robot ran it."""
+        o = np.asarray(obs, dtype=np.float32)
+        before = np.concatenate([o[:1], o[:-1]]) if self.previous_observation else None
+        command = None
+        if self.previous_command:
+            lo, hi = _limits(limits)
+            u = np.asarray(sent, dtype=np.float64).reshape(-1, 2)
+            command = np.zeros_like(u)
+            command[1:] = np.clip(u[:-1], lo, hi)
+        return self.stack(o, before, command)
+
+
+class InputMemory:
+    """A student's inputs step by step: remembers the previous observation and the command
+    sent (:class:`StudentInputs`); ``reset`` at an episode's start."""
+
+    def __init__(self, inputs: StudentInputs, limits: RuntimeConfig | None = None) -> None:
+        self.kind = inputs
+        self._low, self._high = _limits(limits)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous observation and command (o_{t−1} = o_t, u_{t−1} = 0 next)."""
+        self._obs: NDArray[np.float32] | None = None
+        self._command = np.zeros(2)
+
+    def inputs(self, obs: NDArray[np.floating]) -> NDArray[np.float32]:
+        """The inputs ``(1, width)`` for observation ``obs (obs_dim,)`` at this step."""
+        o = np.asarray(obs, dtype=np.float32).reshape(1, -1)
+        before = (o if self._obs is None else self._obs) if self.kind.previous_observation else None
+        command = self._command.reshape(1, 2) if self.kind.previous_command else None
+        return self.kind.stack(o, before, command)
+
+    def note(self, obs: NDArray[np.floating] | None, command: NDArray[np.floating]) -> None:
+        """After a step: the observation decided on (None: the history restarts, as after a
+        scan the runtime did not trust) and the command sent (clipped to the limits)."""
+        self._obs = None if obs is None else np.asarray(obs, dtype=np.float32).reshape(1, -1)
+        self._command = np.clip(np.asarray(command, dtype=np.float64), self._low, self._high)
+
+
+def _limits(limits: RuntimeConfig | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     cfg = limits or RuntimeConfig()
-    u = np.asarray(sent, dtype=np.float64).reshape(-1, 2)
-    lo, hi = np.array([cfg.v_min, -cfg.omega_max]), np.array([cfg.v_max, cfg.omega_max])
-    out = np.zeros_like(u)
-    out[1:] = np.clip(u[:-1], lo, hi)
-    return out.astype(np.float32)
+    return np.array([cfg.v_min, -cfg.omega_max]), np.array([cfg.v_max, cfg.omega_max])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,10 +317,10 @@ class StudentRuntime:
                     "pass the LidarConfig the student was trained with",
                 )
             )
-        # a student that also reads u_{t−1}: the runtime remembers the command it last sent
-        self.previous_command = bool(self.config.get("previous_command", False))
-        self.input_dim = self.obs_dim + (2 if self.previous_command else 0)
-        self._last = np.zeros(2)
+        # a student that also reads o_{t−1} or u_{t−1}: the runtime remembers them
+        self.inputs = StudentInputs.of(self.config)
+        self.input_dim = self.inputs.width(self.obs_dim)
+        self.memory = InputMemory(self.inputs, self.runtime_config)
         self._check_input(p, fix)
         self.outputs = [o.name for o in self.session.get_outputs()]
         self._fetch = [n for n in ("action", "aleatoric", "epistemic") if n in self.outputs]
@@ -252,10 +328,10 @@ class StudentRuntime:
             raise DataError(expect(f"{p}: outputs", "an 'action' output", self.outputs, fix))
 
     def _check_input(self, p: Path, fix: str) -> None:
-        """The graph's input must be ``obs`` of ``(N, input_dim)`` (the observation, and u_{t−1}
-        for a student that reads it): a graph of another width, whatever its metadata says,
-        would fail on its first decision (a named batch size passes; a fixed width must be
-        the inputs')."""
+        """The graph's input must be ``obs`` of ``(N, input_dim)`` (the observation, and
+        o_{t−1} or u_{t−1} for a student that reads them): a graph of another width, whatever
+        its metadata says, would fail on its first decision (a named batch size passes; a
+        fixed width must be the inputs')."""
         inputs = {i.name: list(i.shape) for i in self.session.get_inputs()}
         shape = inputs.get("obs")
         if shape is None:
@@ -272,29 +348,21 @@ class StudentRuntime:
             )
 
     def reset(self) -> None:
-        """Start an episode: forget the last command sent (u_{t−1} = 0 at the first decision)."""
-        self._last = np.zeros(2)
+        """Start an episode: forget the previous observation and command."""
+        self.memory.reset()
 
     def raw_outputs(
-        self, obs: NDArray[np.floating], previous: NDArray[np.floating] | None = None
+        self, x: NDArray[np.floating]
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
-        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for observations ``(N, 29)``
-        (and, for a student that reads it, u_{t−1} ``previous (N, 2)``): the graph's raw
-        outputs, for analysis (the action is not clipped; :meth:`from_observation` and
-        :meth:`step` clip it); the uncertainties are NaN for a regression (MLP) student."""
-        o = np.asarray(obs, dtype=np.float32)
-        if o.ndim != 2 or o.shape[1] != self.obs_dim:
-            raise DataError(
-                expect("obs", f"shape (N, {self.obs_dim})", o.shape, "pass 29-D observations")
-            )
-        if (previous is None) == self.previous_command:
-            wanted = "u_{t−1} (N, 2)" if self.previous_command else "None"
-            fix = "pass previous" if self.previous_command else "drop previous"
-            raise DataError(expect("previous", wanted, type(previous).__name__, fix))
-        if previous is not None and np.shape(previous) != (o.shape[0], 2):
-            got = np.shape(previous)
-            raise DataError(expect("previous", f"shape ({o.shape[0]}, 2)", got, "fix it"))
-        x = student_inputs(o, previous)
+        """``(action (N, 2), aleatoric (N,), epistemic (N,))`` for inputs ``(N, input_dim)``:
+        the 29-D observations, followed for a student that reads them by o_{t−1} and u_{t−1}
+        (:meth:`StudentInputs.stack`). The graph's raw outputs, for analysis (the action is not
+        clipped; :meth:`from_observation` and :meth:`step` clip it); the uncertainties are NaN
+        for a regression (MLP) student."""
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        if x.ndim != 2 or x.shape[1] != self.input_dim:
+            what = f"{self.input_dim}-D inputs (StudentInputs.stack)"
+            raise DataError(expect("obs", f"shape (N, {self.input_dim})", x.shape, f"pass {what}"))
         if not np.isfinite(x).all():
             raise DataError(expect("obs", "finite values", "NaN or inf", "check the scan"))
         got = self.session.run(self._fetch, {"obs": x})
@@ -306,8 +374,12 @@ class StudentRuntime:
 
     def from_observation(self, obs: NDArray[np.floating]) -> RuntimeDecision:
         """The decision for one observation ``(29,)``, clipped to the command limits (a
-        non-finite action is a stop with reason ``"action"``); no scan, so no scan health."""
-        return self._sent(self._decide(obs, math.nan, math.nan, math.nan))
+        non-finite action is a stop with reason ``"action"``); no scan, so no scan health.
+        A student reading o_{t−1} or u_{t−1} takes them from this runtime's previous decision
+        (:meth:`reset` at an episode's start)."""
+        d = self._decide(obs, math.nan, math.nan, math.nan)
+        self.memory.note(None if d.stopped else obs, np.array([d.v, d.omega]))
+        return d
 
     def step(
         self,
@@ -333,13 +405,12 @@ class StudentRuntime:
         age = math.nan if age_s is None else float(age_s)
         reason = self._scan_fault(reading, age_s)
         if reason is not None:
-            return self._sent(_stop(reason, reading.valid_share, reading.coverage_rad, age))
-        return self._sent(self._decide(obs, reading.valid_share, reading.coverage_rad, age))
-
-    def _sent(self, decision: RuntimeDecision) -> RuntimeDecision:
-        """Remember the command that leaves (u_{t−1} of the next decision)."""
-        self._last = np.array([decision.v, decision.omega])
-        return decision
+            d = _stop(reason, reading.valid_share, reading.coverage_rad, age)
+        else:
+            d = self._decide(obs, reading.valid_share, reading.coverage_rad, age)
+        # after a stop the history restarts: the next observation is its own o_{t−1}
+        self.memory.note(None if d.stopped else obs, np.array([d.v, d.omega]))
+        return d
 
     def _scan_fault(self, reading: ScanReading, age_s: float | None) -> str | None:
         """The first of STOP_REASONS the scan has, or None."""
@@ -355,8 +426,7 @@ class StudentRuntime:
     def _decide(
         self, obs: NDArray[np.floating], valid_share: float, coverage_rad: float, age_s: float
     ) -> RuntimeDecision:
-        prev = self._last.reshape(1, 2) if self.previous_command else None
-        a, al, ep = self.raw_outputs(np.reshape(obs, (1, -1)), prev)
+        a, al, ep = self.raw_outputs(self.memory.inputs(obs))
         v, w = float(a[0, 0]), float(a[0, 1])
         if not (math.isfinite(v) and math.isfinite(w)):
             return _stop("action", valid_share, coverage_rad, age_s)

@@ -57,7 +57,6 @@ from pioneer.bounds import Count, NonNegativeInt, Positive
 from pioneer.config import Config
 from pioneer.control.teacher import SoftMargins
 from pioneer.data import base_scenario
-from pioneer.deploy.runtime import previous_commands, student_inputs
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
 from pioneer.imitation.rounds import one_thread as _worker_init
@@ -327,13 +326,10 @@ class _Students:
         return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, margins)
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
-        """Inputs (the observation, and u_{t−1} for a ``previous_command`` student) and labels
-        of every frame."""
-        reads_prev = self.cfg.student.previous_command
-        x = [
-            student_inputs(e["obs"], previous_commands(e["applied"]) if reads_prev else None)
-            for e in episodes
-        ]
+        """Inputs (the observation, and o_{t−1} or u_{t−1} for a student that reads them:
+        :meth:`~pioneer.deploy.runtime.StudentInputs.of_episode`) and labels of every frame."""
+        inputs = self.cfg.student.inputs
+        x = [inputs.of_episode(e["obs"], e["applied"]) for e in episodes]
         return np.concatenate(x), np.concatenate([e["action"] for e in episodes]).astype(np.float32)
 
     def loss(self, model: Student, data: Data) -> float:

@@ -1,9 +1,9 @@
 """ONNX export of a student, for the torch-free robot runtime (:mod:`pioneer.deploy`).
 
 The graph has one input ``obs`` (batch, input_dim) float32 — the 29-D observation, raw (the
-standardisation is inside the graph), followed for a student trained with
-``previous_command`` by u_{t−1} (v, ω), the command sent at the previous step
-(:func:`pioneer.deploy.runtime.student_inputs`) — and a dynamic batch axis. Outputs:
+standardisation is inside the graph), followed for a student that reads them by the previous
+observation o_{t−1} and u_{t−1} (v, ω), the command sent at the previous step
+(:class:`pioneer.deploy.runtime.StudentInputs`) — and a dynamic batch axis. Outputs:
 
 - MDN: ``action`` (batch, 2) the deterministic command (v [m/s], ω [rad/s]) chosen by the
   model's ``action_mode`` (mean of the most probable component by default), ``aleatoric``

@@ -47,6 +47,7 @@ from torch import nn
 from pioneer.bounds import Count, NonNegative, UnitInterval
 from pioneer.config import Config, default
 from pioneer.deploy.mixture import ACTION_MODES, ActionMode, mixture_action, mixture_uncertainty
+from pioneer.deploy.runtime import StudentInputs
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
@@ -92,14 +93,21 @@ class StudentConfig(Config):
     # mixture mean ("mean"); see the module docstring
     action_mode: ActionMode = "mode"
     nll_beta: UnitInterval = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
-    # beyond the paper: the inputs also hold u_{t−1}, the command the robot sent at the
-    # previous step (2 more inputs after the observation; zeros at an episode's start)
+    # beyond the paper (pioneer.deploy.runtime.StudentInputs): the inputs also hold the
+    # previous step's observation o_{t−1} (obs_dim more) and/or u_{t−1}, the command the robot
+    # sent at the previous step (2 more)
+    previous_observation: bool = False
     previous_command: bool = False
 
     @property
+    def inputs(self) -> StudentInputs:
+        """What the student reads besides o_t."""
+        return StudentInputs(self.previous_observation, self.previous_command)
+
+    @property
     def input_dim(self) -> int:
-        """The network's input width: the observation, and u_{t−1} with ``previous_command``."""
-        return self.obs_dim + (ACTION_DIM if self.previous_command else 0)
+        """The network's input width: the observation, o_{t−1} and u_{t−1} if it reads them."""
+        return self.inputs.width(self.obs_dim)
 
 
 # The StudentConfig fields only an MDN uses (an MLP ignores them).

@@ -23,7 +23,7 @@ import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
-from pioneer.deploy.runtime import RuntimeConfig, student_inputs
+from pioneer.deploy.runtime import InputMemory
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
 
@@ -36,9 +36,9 @@ class StudentPolicy:
     ``act`` returns the deterministic action (MDN: mean of the most probable component, or
     the mixture mean with ``action_mode="mean"``). ``uncertainty`` holds ``(aleatoric,
     epistemic)`` [(m/s)² + (rad/s)²] for every step of the current episode, NaN for the MLP;
-    ``reset`` clears it. A student trained with ``previous_command`` also reads u_{t−1}: the
-    command it sent at the previous step, clipped to the robot's limits as the robot runs it
-    (zeros after ``reset``), exactly as the ONNX runtime does.
+    ``reset`` clears it. A student that also reads o_{t−1} or u_{t−1}
+    (:class:`~pioneer.deploy.runtime.StudentInputs`) remembers them as the ONNX runtime does:
+    the observation it decided on and the command it sent, clipped to the robot's limits.
     """
 
     def __init__(
@@ -49,21 +49,18 @@ class StudentPolicy:
         self.action_mode = action_mode or model.config.action_mode
         self.checkpoint: Path | None = None  # the file it was loaded from (make_student_policy)
         self.uncertainty: list[tuple[float, float]] = []
-        limits = RuntimeConfig()
-        self._low = np.array([limits.v_min, -limits.omega_max])
-        self._high = np.array([limits.v_max, limits.omega_max])
-        self._last = np.zeros(2)
+        self.memory = InputMemory(model.config.inputs)
+        self._obs: NDArray[np.float32] | None = None  # the observation of the last act
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Start an episode (the student is deterministic; ``rng`` is unused)."""
         self.uncertainty = []
-        self._last = np.zeros(2)
+        self.memory.reset()
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""
-        o = np.asarray(obs, dtype=np.float32).reshape(1, -1)
-        prev = self._last.reshape(1, 2) if self.model.config.previous_command else None
-        x = torch.as_tensor(student_inputs(o, prev))
+        self._obs = np.asarray(obs, dtype=np.float32)
+        x = torch.as_tensor(self.memory.inputs(self._obs))
         with torch.inference_mode():
             if isinstance(self.model, MDN):
                 logits, mu, sigma = self.model(x)
@@ -78,9 +75,9 @@ class StudentPolicy:
         return command
 
     def sent(self, command: NDArray[np.floating]) -> None:
-        """Note the command the robot ran this step (u_{t−1} of the next), clipped to its
-        limits: ``act`` notes its own; a wrapper that sends another (a shield) notes that."""
-        self._last = np.clip(np.asarray(command, dtype=np.float64), self._low, self._high)
+        """Note the command the robot ran this step (u_{t−1} of the next): ``act`` notes its
+        own; a wrapper that sends another (a shield) notes that."""
+        self.memory.note(self._obs, command)
 
 
 def make_student_policy(
