@@ -47,6 +47,9 @@ def _corner_human() -> HumanSpec:
     )
 
 
+NO_MARGINS = TeacherConfig(margins=SoftMargins(human=0.0, wall=0.0))  # the paper's teacher
+
+
 def _rollout_of(teacher: LookaheadTeacher, world, state):
     cfg = teacher.config
     return rollout(world, state, teacher.candidates, cfg.horizon, cfg.dt, cfg.human_model)
@@ -260,7 +263,7 @@ def _beside_the_route():
 @pytest.mark.parametrize("margin", [0.2, 0.3])
 def test_a_soft_margin_is_kept_when_some_candidate_keeps_it(margin):
     world, state = _beside_the_route()
-    plain = LookaheadTeacher(None)
+    plain = LookaheadTeacher(None, config=NO_MARGINS)
     d0 = plain.decide(world, state)
     ro = _rollout_of(plain, world, state)
     assert ro.min_gap[d0.index] < margin
@@ -277,7 +280,7 @@ def test_a_soft_margin_is_kept_when_some_candidate_keeps_it(margin):
 
 def test_a_soft_margin_no_candidate_keeps_falls_back_to_the_collision_free_choice():
     world, state = _beside_the_route()
-    plain = LookaheadTeacher(None).decide(world, state)
+    plain = LookaheadTeacher(None, config=NO_MARGINS).decide(world, state)
     huge = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(human=5.0, wall=5.0)))
     d = huge.decide(world, state)
     assert d.index == plain.index >= 0  # unlike the hard margin, it never leaves it stopped
@@ -288,7 +291,7 @@ def test_a_soft_wall_margin_keeps_the_choice_off_the_walls():
     world = room_world(3.0, 3.0)
     # heading along a wall, 0.15 m off it (surface): the plain teacher may hug it
     state = make_state((0.0, 2.55, 0.0), goal=(2.5, 2.55))
-    plain = LookaheadTeacher(None)
+    plain = LookaheadTeacher(None, config=NO_MARGINS)
     ro = _rollout_of(plain, world, state)
     soft = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(wall=0.1)))
     d = soft.decide(world, state)
@@ -409,8 +412,9 @@ def test_switching_a_term_off_zeroes_it(off, hr_rl_reward):
 
 
 def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
-    """Infeasible candidates are never chosen, so their density is not computed; the choice
-    equals the one from scoring every candidate (eq. 14 for all 120)."""
+    """Infeasible candidates (and, when some keep the soft margins, those that do not) are
+    never chosen, so their density is not computed; the choice equals the one from scoring
+    every candidate (eq. 14 for all 120)."""
     rows: list[int] = []
 
     def recording(z):
@@ -426,6 +430,9 @@ def test_density_is_evaluated_for_feasible_candidates_only(hr_rl_reward):
         ro = _rollout_of(t, world, state)
         c, n_l = ro.robot.shape[:2]
         feasible = ~ro.collided & (ro.min_gap >= t.config.safety_margin)
+        m = t.config.margins
+        keep = feasible & (ro.min_gap >= m.human) & (ro.min_wall_gap >= m.wall)
+        feasible = keep if keep.any() else feasible  # the candidates it chooses among
         assert rows == ([int(feasible.sum()) * n_l] if feasible.any() else [])
         mixed += int(0 < feasible.sum() < c)
         # reference: the density of all candidates, then the feasibility mask

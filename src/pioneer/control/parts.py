@@ -78,7 +78,9 @@ def student_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
     if params.get("checkpoint"):
         return {}
     kind = str(params.get("kind") or DEFAULT_STUDENT_KIND)
-    return {"checkpoint": shipped_student(scenario, kind, bool(params.get("general")))}
+    seed, recipe = int(params.get("seed", 0)), str(params.get("recipe", ""))
+    path = shipped_student(scenario, kind, bool(params.get("general")), seed, recipe)
+    return {"checkpoint": path}
 
 
 def shield_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:

@@ -182,6 +182,16 @@ _BUILTINS = (
         name="student-mdn",
     ),
     _builtin(
+        "student-mdn-paper",
+        "pioneer.learn.policy:make_student_policy",
+        "DAgger MDN student, the paper's recipe (§V-B.2: teacher without margins)",
+        **_STUDENT_PARTS,
+        extra="learn",
+        kind="mdn",
+        recipe="paper",
+        name="student-mdn-paper",
+    ),
+    _builtin(
         "student-mlp",
         "pioneer.learn.policy:make_student_policy",
         "DAgger MLP student",

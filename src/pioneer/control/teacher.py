@@ -60,8 +60,10 @@ class SoftMargins(Config):
     chooses from those predicted to keep both gaps when any does, else from all feasible ones.
     Unlike ``TeacherConfig.safety_margin`` they never leave the teacher without a command."""
 
-    human: NonNegative = 0.0  # [m] predicted gap (surface to surface) to every person
-    wall: NonNegative = 0.0  # [m] predicted gap to every wall
+    # Beyond the paper (docs/teacher.md, "Soft margins"): chosen on validation episodes so
+    # that the DAgger students, who imitate the teacher to within centimetres, have room.
+    human: NonNegative = 0.1  # [m] predicted gap (surface to surface) to every person
+    wall: NonNegative = 0.05  # [m] predicted gap to every wall
 
 
 @dataclasses.dataclass(frozen=True)

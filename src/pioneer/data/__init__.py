@@ -11,6 +11,7 @@ __all__ = [
     "CROWDNAV_VARIANTS",
     "DEFAULT_STUDENT_KIND",
     "EPISODE_TIMES",
+    "STUDENT_SEEDS",
     "base_scenario",
     "shipped_crowdnav_weights",
     "shipped_demos",
@@ -25,6 +26,7 @@ BASELINES_DIR = Path(__file__).parent / "baselines"
 EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
 # The shipped student a policy loads when not told which kind: the paper's MDN (§V-B.2).
 DEFAULT_STUDENT_KIND = "mdn"
+STUDENT_SEEDS = (0, 1, 2)  # the DAgger seeds of the shipped students (Table III)
 
 
 def base_scenario(scenario: str) -> str:
@@ -52,10 +54,20 @@ def shipped_demos(scenario: str) -> Path:
     return p
 
 
-def shipped_student(scenario: str, kind: str = DEFAULT_STUDENT_KIND, general: bool = False) -> Path:
+def shipped_student(
+    scenario: str,
+    kind: str = DEFAULT_STUDENT_KIND,
+    general: bool = False,
+    seed: int = 0,
+    recipe: str = "",
+) -> Path:
     """Path of the shipped DAgger-trained student (``kind`` "mdn" | "mlp") for ``scenario``;
-    ``general``: the one student for many worlds (``general-KIND``), whatever the scenario."""
+    ``general``: the one student for many worlds (``general-KIND``), whatever the scenario.
+    ``seed``: its DAgger seed (one of :data:`STUDENT_SEEDS`; seed 0 is the default student);
+    ``recipe``: another recipe than the shipped one (``"paper"``: the paper's, §V-B.2)."""
     stem = f"general-{kind}" if general else f"{base_scenario(scenario)}-{kind}"
+    stem += f"-{recipe}" if recipe else ""
+    stem += f"-s{seed}" if seed else ""
     p = STUDENTS_DIR / f"{stem}.safetensors"
     if not p.is_file():
         names = sorted(q.stem for q in STUDENTS_DIR.glob("*.safetensors"))

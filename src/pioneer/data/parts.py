@@ -30,7 +30,8 @@ def student(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
     if not kwargs.get("checkpoint"):
         kind = str(kwargs.get("kind", DEFAULT_STUDENT_KIND))
-        shipped_student(scenario, kind, bool(kwargs.get("general")))
+        seed, recipe = int(kwargs.get("seed", 0)), str(kwargs.get("recipe", ""))
+        shipped_student(scenario, kind, bool(kwargs.get("general")), seed, recipe)
 
 
 def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from pioneer.data import STUDENT_SEEDS
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
@@ -65,10 +66,12 @@ PROFILES = {
 SCENARIOS = ("hr-rl", "hl-rr")
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
+PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
 CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
+SEED_ROW = "{name}-s{seed}"  # the row of a student's other DAgger seeds (seed 0: its name)
 # uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
 UNCERTAINTY_KEY = f"threshold_{RISKY_DISTANCE_M:g}m"
 
@@ -92,8 +95,10 @@ class EpisodeTimes:
     notes: tuple[str, ...] = ()
 
     def of(self, row: str) -> float:
-        """The mean time [s] of one episode of the policy row ``row``."""
-        return float(self.episode_s.get(row, self.default_episode_s))
+        """The mean time [s] of one episode of the policy row ``row`` (a student's other
+        DAgger seeds cost what its seed 0 costs)."""
+        name = row.rsplit("-s", 1)[0] if row.rsplit("-s", 1)[-1].isdigit() else row
+        return float(self.episode_s.get(row, self.episode_s.get(name, self.default_episode_s)))
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (the keys :func:`load_episode_times` reads)."""
@@ -260,7 +265,7 @@ def _reproduce(
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
     policies = [PolicySpec.make(name, reward=reward_tpl) for name in TEACHERS]
     extra = [PolicySpec.make(name) for name in (*BASELINES, *CLASSIC)] + list(extra_policies)
-    students = [PolicySpec.make(name) for name in STUDENTS]
+    students = student_specs()
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
     policies += extra + students
     if progress:
@@ -297,6 +302,7 @@ def _reproduce(
             ),
         ],
     )
+    md += _seed_table(summary, [*STUDENTS, PAPER_STUDENT])
     md += _table_iv(out, records)
     rows = [p.row for p in policies]
     md += _social_tables(summary, rows)
@@ -414,6 +420,48 @@ def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
         + table_iv_markdown(matched, SCENARIOS)
         + "\n![uncertainty histograms](figures/uncertainty_safe_risky.png)\n"
     )
+
+
+def student_specs() -> list[PolicySpec]:
+    """Table III's students: each shipped recipe (and the paper's) at every DAgger seed of
+    :data:`pioneer.data.STUDENT_SEEDS`; seed 0 is the row of its name."""
+    return [
+        PolicySpec.make(name, label=_seed_row(name, seed), seed=seed)
+        for name in (*STUDENTS, PAPER_STUDENT)
+        for seed in STUDENT_SEEDS
+    ]
+
+
+def _seed_row(name: str, seed: int) -> str:
+    return name if seed == 0 else SEED_ROW.format(name=name, seed=seed)
+
+
+def _seed_table(summary: Mapping[str, Mapping[str, Any]], names: Sequence[str]) -> str:
+    """Markdown: each student over its DAgger seeds — the mean success, the spread between
+    seeds and every seed's (the per-seed rows, with intervals, are in Table III)."""
+    lines = [
+        "\n### Table III over DAgger seeds",
+        "",
+        "One DAgger run per seed (the same episodes for every student); mean and standard "
+        "deviation over the seeds' success rates, and each seed's.",
+        "",
+        "| scenario | student | seeds | SR mean ± sd (%) | SR per seed (%) | collisions mean (%) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for sc in SCENARIOS:
+        for name in names:
+            cells = [summary.get(f"{sc}/{_seed_row(name, s)}") for s in STUDENT_SEEDS]
+            got = [c for c in cells if c is not None]
+            if not got:
+                continue
+            sr = np.array([float(c["success_rate"]["mean"]) for c in got])  # [%]
+            coll = np.mean([float(c["collision_rate"]["mean"]) for c in got])
+            each = " / ".join(f"{v:.1f}" for v in sr)
+            lines.append(
+                f"| {sc.upper()} | {name} | {len(got)} | {sr.mean():.1f} ± {sr.std(ddof=0):.1f} "
+                f"| {each} | {coll:.1f} |"
+            )
+    return "\n".join(lines) + "\n"
 
 
 def _social_tables(summary: Mapping[str, Mapping[str, Any]], rows: Sequence[str]) -> str:

@@ -88,15 +88,18 @@ def make_student_policy(
     action_mode: str | None = None,
     torch_threads: Annotated[int, Ge(1)] | None = 1,
     general: bool = False,
+    seed: Annotated[int, Ge(0)] = 0,
+    recipe: str = "",
 ) -> StudentPolicy:
     """Policy factory: load ``checkpoint`` (``{scenario}`` filled in) as a :class:`StudentPolicy`.
 
     Without ``checkpoint``: the shipped DAgger student of ``scenario`` and ``kind`` (default
     "mdn"; :func:`pioneer.data.shipped_student`), or with ``general`` the one student for many
-    worlds. ``kind`` ("mdn" | "mlp"), when given, must
-    match the checkpoint. ``torch_threads`` sets torch's intra-op threads for this process
-    (1 by default: a batch-1 forward pass gains nothing from threads, and evaluation runs one
-    worker per core); ``None`` leaves it.
+    worlds; ``seed`` picks one of its DAgger seeds (:data:`pioneer.data.STUDENT_SEEDS`) and
+    ``recipe="paper"`` the paper's recipe (``student-mdn-paper``). ``kind`` ("mdn" | "mlp"),
+    when given, must match the checkpoint. ``torch_threads`` sets torch's intra-op threads for
+    this process (1 by default: a batch-1 forward pass gains nothing from threads, and
+    evaluation runs one worker per core); ``None`` leaves it.
     """
     if checkpoint is None:
         from pioneer.data import DEFAULT_STUDENT_KIND, shipped_student
@@ -105,7 +108,9 @@ def make_student_policy(
             raise ConfigError(
                 expect("student policy", "checkpoint=PATH or a scenario", None, "pass one")
             )
-        checkpoint = shipped_student(scenario or "", kind or DEFAULT_STUDENT_KIND, general=general)
+        checkpoint = shipped_student(
+            scenario or "", kind or DEFAULT_STUDENT_KIND, general, seed, recipe
+        )
     path = str(checkpoint).format(scenario=scenario) if scenario is not None else str(checkpoint)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
