@@ -75,17 +75,22 @@ def test_dagger_aggregates_each_episodes_own_history():
             "obs": np.full((n, 29), float(n), dtype=np.float32),
             "action": np.zeros((n, 2), dtype=np.float32),
             "applied": np.arange(2 * n, dtype=np.float64).reshape(n, 2) / 10,
+            "gap": np.linspace(0.05, 1.0, n),
         }
         for n in (3, 2)
     ]
     cfg = DaggerConfig(student=StudentConfig(previous_command=True))
-    x, y = Students(cfg, {}).aggregate(eps)
+    x, y, repeat = Students(cfg, {}).aggregate(eps)
+    np.testing.assert_array_equal(repeat, 1)
     assert x.shape == (5, 31) and y.shape == (5, 2)
     np.testing.assert_allclose(
         x[:, 29:], [[0, 0], [0, 0.1], [0.2, 0.3], [0, 0], [0, 0.1]], atol=1e-7
     )  # each episode starts from zeros
-    plain, _ = Students(DaggerConfig(), {}).aggregate(eps)
+    plain, _, _ = Students(DaggerConfig(), {}).aggregate(eps)
     assert plain.shape == (5, 29)
+    # near_gap/near_repeat: frames closer than 0.3 m to a person count 4 times
+    _, _, repeat = Students(DaggerConfig(near_gap=0.3, near_repeat=4), {}).aggregate(eps)
+    np.testing.assert_array_equal(repeat, [4, 1, 1, 4, 1])
 
 
 @pytest.fixture(scope="module", params=sorted(KINDS))

@@ -53,7 +53,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from pioneer.bounds import Count, NonNegativeInt, Positive
+from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
 from pioneer.config import Config
 from pioneer.control.teacher import SoftMargins
 from pioneer.data import base_scenario
@@ -114,6 +114,11 @@ class DaggerConfig(Config):
     batch: Count = TRAIN_BATCH  # frames per Adam step
     lr: Positive = TRAIN_LR  # Adam learning rate
     seed: NonNegativeInt = 0  # seeds the networks and the DAgger episodes
+    # beyond the paper: a frame whose gap to the nearest person (surface to surface, at
+    # decision time) is below near_gap counts near_repeat times in training — the rare frames
+    # where the teacher's correction decides between a pass and a collision
+    near_gap: NonNegative = 0.0  # [m]
+    near_repeat: Count = 1
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
@@ -273,7 +278,8 @@ def _prepare(
 
 
 # ------------------------------------------------------------------------------ the method
-Data = tuple[NDArray[np.float32], NDArray[np.float32]]  # observations, teacher labels
+# inputs, teacher labels, and how often each frame counts in training (near_repeat)
+Data = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.int64]]
 
 
 def _episode_scenario(cfg: DaggerConfig, names: list[str], rnd: int, i: int) -> str:
@@ -328,9 +334,12 @@ class _Students:
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
         """Inputs (the observation, and o_{t−1} or u_{t−1} for a student that reads them:
         :meth:`~pioneer.deploy.runtime.StudentInputs.of_episode`) and labels of every frame."""
-        inputs = self.cfg.student.inputs
-        x = [inputs.of_episode(e["obs"], e["applied"]) for e in episodes]
-        return np.concatenate(x), np.concatenate([e["action"] for e in episodes]).astype(np.float32)
+        cfg = self.cfg
+        x = [cfg.student.inputs.of_episode(e["obs"], e["applied"]) for e in episodes]
+        gap = np.concatenate([np.asarray(e["gap"], dtype=np.float64) for e in episodes])
+        repeat = np.where(gap < cfg.near_gap, cfg.near_repeat, 1).astype(np.int64)
+        labels = np.concatenate([e["action"] for e in episodes]).astype(np.float32)
+        return np.concatenate(x), labels, repeat
 
     def loss(self, model: Student, data: Data) -> float:
         """``model``'s loss on frames it was not trained on (eval mode: dropout off)."""
@@ -344,13 +353,16 @@ class _Students:
         if model is None:
             model = build_student(cfg.student, seed=cfg.seed)
         epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
-        x, y = step.data
+        x, y, repeat = step.data
+        x_fit, y_fit = x, y
+        if (repeat != 1).any():  # near frames repeated (near_gap, near_repeat)
+            x_fit, y_fit = np.repeat(x, repeat, axis=0), np.repeat(y, repeat, axis=0)
         history: list[float] = []
         if epochs > 0:
             # The normalisation is fitted once, for the fresh network: re-fitting it under
             # warm-started weights would shift every input and output of a trained network.
             history = train_student(
-                model, x, y, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd,
+                model, x_fit, y_fit, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd,
                 fit_normalizer=fresh,
             )  # fmt: skip
         info = {
