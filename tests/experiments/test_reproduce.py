@@ -8,16 +8,19 @@ from pathlib import Path
 import pytest
 
 from pioneer.cli import main
+from pioneer.data import STUDENT_SEEDS
 from pioneer.eval.harness import read_records
 from pioneer.eval.metrics import RANGES
 from pioneer.experiments.reproduce import (
     BASELINES,
     CLASSIC,
+    PAPER_STUDENT,
     SCENARIOS,
     SHIELD,
     STUDENTS,
     TEACHERS,
     UNCERTAINTY_KEY,
+    student_specs,
 )
 
 
@@ -36,18 +39,21 @@ def test_the_uncertainty_key_names_the_paper_threshold() -> None:
 def test_every_row_is_evaluated_once(smoke: Path) -> None:
     recs = read_records(smoke / "eval" / "episodes.jsonl")
     rows = {(r["scenario"], r["policy"]) for r in recs}
-    rows_i = (*TEACHERS, *BASELINES, *CLASSIC, *STUDENTS, SHIELD)
+    student_rows = [p.row for p in student_specs()]
+    rows_i = (*TEACHERS, *BASELINES, *CLASSIC, *student_rows, SHIELD)
     expected = {(sc, p) for sc in SCENARIOS for p in rows_i}
     assert rows == expected
     assert len(recs) == len(expected)  # 1 seed × 1 trial each
-    students = [r for r in recs if r["policy"] in (*STUDENTS, SHIELD)]
+    students = [r for r in recs if r["policy"] in (*student_rows, SHIELD)]
     assert all(len(r["frames"]["clearance"]) == r["steps"] for r in students)
 
 
 def test_the_report_has_tables_i_to_iv_and_its_figures(smoke: Path) -> None:
     index = (smoke / "index.md").read_text()
-    for title in ("Table I", "Table II", "Table III", "Table IV"):
+    for title in ("Table I", "Table II", "Table III", "Table III over DAgger seeds", "Table IV"):
         assert title in index
+    for name in (*STUDENTS, PAPER_STUDENT):  # every student over its seeds
+        assert f"| HR-RL | {name} | {len(STUDENT_SEEDS)} |" in index
     for row in ("crowdnav++", "cvar-bf", "student-mdn", "student-mlp", SHIELD):
         assert f"| {row}" in index or f"{row} |" in index
     unc = json.loads((smoke / "uncertainty.json").read_text())

@@ -124,6 +124,15 @@ _CROWDNAV_PARTS = {"check": f"{_PARTS}:crowdnav", "files": f"{_OWN}:crowdnav_fil
 _BUILTINS = (
     _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", **_TEACHER_PARTS),
     _builtin(
+        "teacher-paper",
+        _TEACHER,
+        "lookahead teacher without the soft margins (the paper's, §IV-A.2)",
+        **_TEACHER_PARTS,
+        human_margin=0.0,
+        wall_margin=0.0,
+        name="teacher-paper",
+    ),
+    _builtin(
         "teacher-no-density",
         _TEACHER,
         "teacher without R_den (Table II)",

@@ -106,7 +106,7 @@ def _humans_alone(world: Any, state0: Any, time_limit: float) -> tuple[bool, lis
 
 def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     """The three runs of one validation episode (a picklable task for the worker pool):
-    ``(scenario, seed, driver)``, the driver a policy name (``teacher`` by default)."""
+    ``(scenario, seed, driver)``, the driver a policy name (``teacher-paper`` by default)."""
     from pioneer.control.registry import build_policy
     from pioneer.demos.scripted import CarelessDriver
     from pioneer.eval.episode import run_episode
@@ -206,11 +206,13 @@ def calibrate(
     out_dir: str | Path | None = None,
     workers: int | None = None,
     progress: bool = True,
-    driver: str = "teacher",
+    driver: str = "teacher-paper",
 ) -> dict[str, Any]:
     """Measure the world statistics of ``scenarios`` on ``episodes`` validation seeds each;
     write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
-    policy whose statistics are the ``teacher_*`` keys (e.g. ``teacher-no-density``)."""
+    policy whose statistics are the ``teacher_*`` keys: by default the paper's teacher (no
+    soft margins), whose TT and PL the bands compare with the paper's; e.g.
+    ``teacher-no-density``."""
     from pioneer.control.registry import check_parts, policy_factory
     from pioneer.eval.harness import PolicySpec, made_by
     from pioneer.sim.scenarios import get_scenario, pin_scenario

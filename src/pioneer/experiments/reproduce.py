@@ -69,7 +69,9 @@ STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger
 PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
-CLASSIC = ("dwa", "sfm", "goal")  # beyond the paper: classic references in Table I
+# beyond the paper, in Table I: the teacher without its soft margins (the paper's) and classic
+# references
+CLASSIC = ("teacher-paper", "dwa", "sfm", "goal")
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 SEED_ROW = "{name}-s{seed}"  # the row of a student's other DAgger seeds (seed 0: its name)
 # uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
