@@ -56,6 +56,11 @@ Wiring a ROS 2 ``sensor_msgs/LaserScan`` topic (sketch; rclpy and tf2 are not de
             out.linear.x, out.angular.z = d.v, d.omega  # 0, 0 on a stop (log d.stop_reason)
             self.cmd.publish(out)  # log d.aleatoric / d.epistemic, or gate on them (shield)
 
+A student trained to read the previous observation or its previous command
+(:class:`StudentInputs`) takes them from the runtime's previous decision: call
+``runtime.reset()`` when the robot starts towards a new goal (the node above would do it in
+its goal callback), as the simulator's episodes start from o_{t−1} = o_t and u_{t−1} = 0.
+
 The scan must be in a frame whose origin is the robot centre, x forward, counter-clockwise
 positive (``base_link``); if the laser is mounted off-centre or upside down, transform or
 reverse the ranges first (a negative ``angle_increment`` is handled). A malformed message (no
