@@ -281,6 +281,7 @@ def replay_bag(
     bag = Path(bag_path)
     _check_bag(bag)
     runtime = _runtime(model_onnx, lidar)
+    runtime.reset()  # a bag is one drive to its goal: no previous scan or command before it
     _tqdm()  # the [ros] extra's tqdm, or one line naming it
     reader = _open_reader(bag)
     from rosbags.highlevel import AnyReaderError

@@ -85,6 +85,7 @@ class ScannerPolicy:
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Start an episode (deterministic; ``rng`` is unused)."""
         self.stops = {}
+        self.runtime.reset()
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The runtime's command ``(v [m/s], ω [rad/s])`` on this step's scan, shape ``(2,)``."""
