@@ -29,7 +29,7 @@ Benchmarks and targets (docs/performance.md explains them):
                           and the teacher/student decision-time ratio
 - ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
-- ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 15 min
+- ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 5 min
 - ``cvar_bf_decision``    CVaR-BF over 4 seeded HR-RL episodes                <= 4 ms, p90 <= 8 ms
                           and its ratio to the host probe's GEMM (256³ float32) <= 19
 - ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights, 1 thread      <= 1 ms

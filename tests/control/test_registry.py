@@ -136,3 +136,35 @@ def test_the_general_student_serves_every_scenario():
         pol = registry.build_policy("student-general", scenario)
         assert pol.name == "student-general"
     registry.check_parts("student-general", "not-a-built-in", {})  # no per-scenario file
+
+
+def test_every_shipped_student_seed_and_the_paper_recipe_load():
+    """Table III's students: each kind at every DAgger seed, and the paper's recipe."""
+    from pioneer.data import STUDENT_SEEDS, shipped_student
+
+    for scenario in ("hr-rl", "hl-rr"):
+        for seed in STUDENT_SEEDS:
+            for name, kind, recipe in (
+                ("student-mdn", "mdn", ""),
+                ("student-mlp", "mlp", ""),
+                ("student-mdn-paper", "mdn", "paper"),
+            ):
+                path = shipped_student(scenario, kind, seed=seed, recipe=recipe)
+                suffix = (f"-{recipe}" if recipe else "") + (f"-s{seed}" if seed else "")
+                assert path.name == f"{scenario}-{kind}{suffix}.safetensors"
+                registry.check_parts(name, scenario, {"seed": seed})
+                pol = registry.build_policy(name, scenario, seed=seed)
+                assert pol.checkpoint == path
+                assert pol.model.config.kind == kind
+    # the paper's recipe reads the 29-D observation alone
+    paper = registry.build_policy("student-mdn-paper", "hr-rl")
+    assert paper.model.config.input_dim == 29
+
+
+def test_the_teacher_keeps_its_soft_margins_and_teacher_paper_none():
+    from pioneer.control.teacher import SoftMargins
+
+    assert registry.build_policy("teacher", "hr-rl").config.margins == SoftMargins()
+    assert SoftMargins() != SoftMargins(human=0.0, wall=0.0)
+    bare = registry.build_policy("teacher-paper", "hr-rl")
+    assert bare.config.margins == SoftMargins(human=0.0, wall=0.0)
