@@ -221,7 +221,8 @@ def test_default_threshold_is_read_from_the_checkpoint(ckpt):
     assert default_threshold(ckpt, "epistemic", 0.95) == 0.07
     assert default_threshold(ckpt, "aleatoric", 0.9) == 0.1
     assert default_threshold(ckpt, "total", 0.99) == pytest.approx(0.4 + 0.09)
-    assert make_shield_policy(ckpt, fallback="goal").threshold == 0.2  # aleatoric, 0.95
+    # the default: total, q = 0.9 (aleatoric 0.1 + epistemic 0.03)
+    assert make_shield_policy(ckpt, fallback="goal").threshold == pytest.approx(0.13)
     shield = make_shield_policy(ckpt, fallback="goal", signal="total", quantile=0.5)
     assert shield.threshold == pytest.approx(0.06)
     assert make_shield_policy(ckpt, fallback="goal", threshold=0.5).threshold == 0.5
@@ -292,8 +293,9 @@ def test_registered_as_student_shield(ckpt, reward_file):
     pol = build_policy("student-shield", "static", checkpoint=pattern, fallback="goal")
     assert isinstance(pol, ShieldPolicy) and pol.name == "student-shield"
     assert isinstance(pol.fallback, GoalPolicy)
-    assert pol.threshold == QUANTILES["aleatoric"]["0.95"]  # read from the filled-in path
-    assert (pol.signal, pol.mode) == ("aleatoric", "handover")
+    total = QUANTILES["aleatoric"]["0.9"] + QUANTILES["epistemic"]["0.9"]
+    assert pol.threshold == pytest.approx(total)  # read from the filled-in path
+    assert (pol.signal, pol.mode) == ("total", "handover")
 
     pol = build_policy(
         "student-shield",
