@@ -131,7 +131,7 @@ def test_the_general_student_serves_every_scenario():
     path = shipped_student("anything", "mdn", general=True)
     assert path.name == "general-mdn.safetensors"
     info = read_checkpoint_meta(path)["info"]
-    assert info["scenario"] == "general-*" and info["dagger"]["student"] == "mdn"
+    assert info["scenario"] == "general-*" and info["dagger"]["student"]["kind"] == "mdn"
     for scenario in ("hr-rl", "hl-rr", "hr-rl-compact"):
         pol = registry.build_policy("student-general", scenario)
         assert pol.name == "student-general"
