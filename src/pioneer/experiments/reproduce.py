@@ -607,10 +607,11 @@ def _index(
         f"Episodes on {seed_set} seeds (pioneer.seeds). Command: `pioneer reproduce --profile "
         f"{profile}{'' if seed_set == 'evaluation' else ' --seed-set ' + seed_set}`.",
         "",
-        "The shipped students (Table III) and the CrowdNav++ weights (Table I) were trained "
-        "before the current demonstrations and the mirror-true observation (sector 0 centred "
-        "on the heading; they saw heading-first sectors and imitated the earlier teacher): "
-        "their rows measure those weights as shipped, until they are re-learned.",
+        "The CrowdNav++ weights (Table I) were trained before the current demonstrations "
+        "and the mirror-true observation (sector 0 centred on the heading): their row "
+        "measures those weights as shipped, until they are re-learned. The teacher keeps "
+        "soft margins to people and walls (docs/teacher.md); `teacher-paper` is the "
+        "teacher without them.",
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
         "95% confidence intervals: [summary.json](summary.json); tables as CSV: "
