@@ -20,8 +20,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pioneer.data import DEFAULT_STUDENT_KIND, shipped_crowdnav_weights, shipped_student
 from pioneer.data import parts as shipped
+from pioneer.data import shipped_crowdnav_weights, shipped_student_for
 
 __all__ = [
     "check_shield",
@@ -77,10 +77,7 @@ def student_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
     """Without ``checkpoint``, the shipped student of its kind."""
     if params.get("checkpoint"):
         return {}
-    kind = str(params.get("kind") or DEFAULT_STUDENT_KIND)
-    seed, recipe = int(params.get("seed", 0)), str(params.get("recipe", ""))
-    path = shipped_student(scenario, kind, bool(params.get("general")), seed, recipe)
-    return {"checkpoint": path}
+    return {"checkpoint": shipped_student_for(scenario, params)}
 
 
 def shield_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:

@@ -3,7 +3,9 @@ baselines, and the measured episode times of the reference machine."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from pioneer.errors import DataError, expect
 
@@ -16,6 +18,7 @@ __all__ = [
     "shipped_crowdnav_weights",
     "shipped_demos",
     "shipped_student",
+    "shipped_student_for",
 ]
 
 DEMOS_DIR = Path(__file__).parent / "demos"
@@ -52,6 +55,18 @@ def shipped_demos(scenario: str) -> Path:
             )
         )
     return p
+
+
+def shipped_student_for(scenario: str, params: Mapping[str, Any]) -> Path:
+    """The shipped student a student policy's parameters name (``kind``, ``general``,
+    ``seed``, ``recipe``; each defaulting as in :func:`shipped_student`)."""
+    return shipped_student(
+        scenario,
+        str(params.get("kind") or DEFAULT_STUDENT_KIND),
+        bool(params.get("general")),
+        int(params.get("seed", 0)),
+        str(params.get("recipe", "")),
+    )
 
 
 def shipped_student(

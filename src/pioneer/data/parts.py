@@ -11,10 +11,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from pioneer.data import (
-    DEFAULT_STUDENT_KIND,
     shipped_crowdnav_weights,
     shipped_demos,
-    shipped_student,
+    shipped_student_for,
 )
 
 __all__ = ["crowdnav", "shield", "student", "teacher"]
@@ -29,9 +28,7 @@ def teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
 def student(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
     if not kwargs.get("checkpoint"):
-        kind = str(kwargs.get("kind", DEFAULT_STUDENT_KIND))
-        seed, recipe = int(kwargs.get("seed", 0)), str(kwargs.get("recipe", ""))
-        shipped_student(scenario, kind, bool(kwargs.get("general")), seed, recipe)
+        shipped_student_for(scenario, kwargs)
 
 
 def shield(scenario: str, kwargs: Mapping[str, Any]) -> None:

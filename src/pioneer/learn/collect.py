@@ -5,20 +5,22 @@ are cached per worker process."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.imitation.store import file_version, save_episode
 
-__all__ = ["CollectTask", "Margins", "clear_cache", "collect_episode", "collect_task"]
+if TYPE_CHECKING:  # the teacher is imported in the worker, when it is first needed
+    from pioneer.control.teacher import SoftMargins
+
+__all__ = ["CollectTask", "clear_cache", "collect_episode", "collect_task"]
 
 _CACHE: dict[tuple[Any, ...], Any] = {}
-Margins = tuple[float, float]  # the teacher's soft margins [m]: to people, to walls
 # One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
 # env seed, output path, label_prev, the teacher's soft margins.
-CollectTask = tuple[str, str, str | None, int, str, str, Margins]
+CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins"]
 
 
 def clear_cache() -> None:
@@ -26,15 +28,16 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _teacher(scenario: str, reward: str, margins: Margins) -> Any:
+def _teacher(scenario: str, reward: str, margins: SoftMargins) -> Any:
     # One teacher per reward file: it plans from the privileged state and world of each step,
     # so the variants of a layout distribution that share a reward share the teacher.
-    key = ("teacher", reward, *margins)
+    key = ("teacher", reward, margins)
     if key not in _CACHE:
         from pioneer.control.teacher import make_teacher
 
-        human, wall = margins
-        _CACHE[key] = make_teacher(scenario, reward=reward, human_margin=human, wall_margin=wall)
+        _CACHE[key] = make_teacher(
+            scenario, reward=reward, human_margin=margins.human, wall_margin=margins.wall
+        )
     return _CACHE[key]
 
 
@@ -80,7 +83,7 @@ def collect_episode(
     checkpoint: str | None,
     env_seed: int,
     label_prev: str,
-    margins: Margins,
+    margins: SoftMargins,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher

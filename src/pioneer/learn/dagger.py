@@ -328,8 +328,7 @@ class _Students:
         name = _episode_scenario(cfg, sorted(self.rewards), rnd, index)
         seed = dagger_seed(cfg.scenario, cfg.seed, rnd, index)
         ckpt = None if driver is None else str(driver)
-        margins = (cfg.margins.human, cfg.margins.wall)
-        return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, margins)
+        return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, cfg.margins)
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
         """Inputs (the observation, and o_{t−1} or u_{t−1} for a student that reads them:
