@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -85,6 +86,36 @@ def test_human_deflects_around_standing_robot(offset, vpref):
     # The robot did not move and was never hit.
     assert np.array_equal(state.robot[0], [0.0, 0.0, 0.0])
     assert not state.collided[0]
+
+
+def head_on(sf: SocialForceConfig) -> tuple[float, bool]:
+    """A human walking straight at a standing robot (commanded v = 0) with the reaction
+    ``sf``: the smallest centre distance over 10 s and whether they collided."""
+    cfg = far_walls_scenario(0.0, 0.7)
+    cfg = dataclasses.replace(cfg, sim=SimConfig(social_force=sf))
+    world = cfg.world()
+    state = sample_state(cfg, np.random.default_rng(0))
+    closest = np.inf
+    for _ in range(100):
+        state = step(world, state, [0.0, 0.0])
+        closest = min(closest, float(np.linalg.norm(state.h_pos[0, 0] - state.robot[0, :2])))
+    return closest, bool(state.collided[0])
+
+
+def test_a_standing_robot_can_be_avoided_like_a_standing_person():
+    weak = SocialForceConfig()  # the paper world: the weak reaction whatever the robot does
+    standing = SocialForceConfig.preset("standing-robot")
+    assert standing.a_robot == weak.a_robot and standing.a_robot_standing == 2.0
+    # the paper world: the weak term does not stop a person walking at a standing robot
+    d_weak, hit_weak = head_on(weak)
+    assert hit_weak and d_weak < R_HUMAN + R_ROBOT
+    # with the standing reaction the person stops short of it, as in front of a person
+    d_standing, hit_standing = head_on(standing)
+    assert not hit_standing and d_standing > R_HUMAN + R_ROBOT
+    # a robot moving (faster than standing_speed) keeps the weak reaction
+    moving = dataclasses.replace(standing, standing_speed=0.0)
+    d_moving, _ = head_on(moving)
+    assert d_moving == d_weak
 
 
 def test_human_starting_at_rest_reaches_goal():
@@ -281,8 +312,10 @@ def test_social_force_config():
     assert crowd.a_human == 2.0
     assert crowd.a_robot == 0.0  # CrowdNav++: robot.visible = False
     params = SocialForceConfig().as_array()
-    assert params.shape == (12,)
+    assert params.shape == (14,)
     assert params[0] == 0.5  # tau
+    assert params[12] == params[3]  # unset: a standing robot repels like a moving one
+    assert SocialForceConfig.preset("standing-robot").as_array()[12] == 2.0
     with pytest.raises(ConfigError) as exc:
         SocialForceConfig.preset("nope")
     assert_house_message(str(exc.value), "preset")

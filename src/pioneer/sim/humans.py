@@ -33,6 +33,10 @@ Deviations from a bare social-force model, all documented in docs/simulator.md:
 - The robot term is per human: a human whose ``reacts`` flag is 0 ignores the robot (the
   robot is invisible to it, CrowdNav++'s ``robot.visible = False``); A_r = 0 makes every
   human ignore it. The paper's humans are uncooperative (§V-B), see docs/simulator.md.
+- Optionally a *standing* robot (its commanded speed |v| below ``standing_speed``) repels
+  with its own strength ``a_robot_standing`` (people avoid an obstacle standing in their
+  way as they avoid a standing person); unset, it repels like a moving one. A setting for
+  the baselines' study (docs/baselines.md), off in the paper world.
 """
 
 from __future__ import annotations
@@ -79,6 +83,8 @@ PRESETS: dict[str, dict[str, float]] = {
     # Sensitivity study (docs/results.md): how humans react to the robot.
     "robot-invisible": {"a_robot": 0.0},
     "robot-as-human": {"a_robot": 2.0},
+    # The baselines' study (docs/baselines.md): a standing robot repelled like a person.
+    "standing-robot": {"a_robot_standing": 2.0},
 }
 
 
@@ -98,6 +104,8 @@ class SocialForceConfig(Config):
     b_human: Positive = 0.5  # [m] B, human–human repulsion range
     a_robot: NonNegative = A_ROBOT_WEAK  # [m/s²] human–robot repulsion strength; 0: robot invisible
     b_robot: Positive = 0.5  # [m] human–robot repulsion range
+    a_robot_standing: NonNegative | None = None  # [m/s²] A_r for a standing robot; None: a_robot
+    standing_speed: NonNegative = 0.05  # [m/s] a robot commanded slower than this is standing
     a_wall: Positive = 2.0  # [m/s²] human–wall repulsion strength
     b_wall: Positive = 0.2  # [m] human–wall repulsion range (Helbing–Molnár's R = 0.2 m)
     speed_cap_factor: Positive = 1.3  # [-] ‖v‖ ≤ factor · v_pref
@@ -132,6 +140,8 @@ class SocialForceConfig(Config):
                 self.goal_tolerance,
                 self.settle_speed,
                 self.settle_distance,
+                self.a_robot if self.a_robot_standing is None else self.a_robot_standing,
+                self.standing_speed,
             ]
         )
 
@@ -161,6 +171,7 @@ def sfm_substep(
     rx: float,
     ry: float,
     r_robot: float,  # robot position and radius [m]
+    v_robot: float,  # [m/s] the robot's commanded speed in this step
     walls: NDArray[np.float64],  # (M, 4) [m]
     wall_tab: NDArray[np.float64],  # (5, M') World.wall_table: x1, y1, ex, ey, ‖e‖² (padded)
     bounds: NDArray[np.float64],  # (4,) xmin, xmax, ymin, ymax [m]
@@ -184,6 +195,8 @@ def sfm_substep(
     goal_tol = params[9]
     settle_v = params[10]
     settle_d = params[11]
+    if abs(v_robot) < params[13]:
+        a_r = params[12]  # a standing robot
     n = pos.shape[1]
     m = walls.shape[0]
     m_pad = wall_tab.shape[1]

@@ -133,6 +133,7 @@ def step_kernel(
                 x,
                 y,
                 r_robot,
+                v,
                 walls,
                 wall_tab,
                 bounds,
