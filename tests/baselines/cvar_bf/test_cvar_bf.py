@@ -152,7 +152,7 @@ def test_a_person_in_front_makes_it_deviate() -> None:
     state = tu.make_state(
         robot=(0.0, 0.0, 0.0),
         goal=(5.0, 0.0),
-        humans=[{"pos": (1.3, 0.05), "status": ARRIVED}],
+        humans=[{"pos": (1.5, 0.05), "status": ARRIVED}],  # 0.6 m ahead of the body
     )
     pol = _policy()
     d = pol.decide(world, state)
@@ -195,9 +195,10 @@ def test_barrier_condition_holds_at_the_true_next_state() -> None:
     assert min(lin_gap) >= -1e-4
     # Linearisation error: the dynamic-zone term is not convex in u (its softplus, ρ = 10, is
     # sharp in the relative velocity) and the robot moves on an arc, not p_l's Euler step.
-    # One re-linearisation keeps it below 0.06 m² (≈ 2.5 cm of distance at 1.2 m; −0.052 m²
-    # measured with the exact solver, which picks the most conservative feasible β).
-    assert min(true_gap) >= -0.06
+    # One re-linearisation keeps it below 0.08 m² (≈ 3 cm of distance at 1.2 m; −0.067 m²
+    # measured with the exact solver, which picks the most conservative feasible β, at
+    # ℓ = 0.25 m; −0.052 m² at ℓ = 0.15 m: p_l's Euler step errs by ≈ ℓω²Δt²/2).
+    assert min(true_gap) >= -0.08
     # At the chosen level, the most conservative feasible one, the condition is nearly active
     # (its linearised gap ≈ 0), so the true gap is about the linearisation error: median
     # −0.0009 m² measured.

@@ -14,7 +14,7 @@ Robot pose x = (p_r, θ), command u = (v, ω), control period Δt = 0.1 s.
 v_nom = v_max · max(0, cos φ) · min(1, ‖g − p_r‖ / d_slow).
 
 *Unicycle via a look-ahead point.* The barriers constrain the point p_l = p_r + ℓ (cos θ, sin θ)
-(ℓ = 0.15 m) whose velocity is linear in u:
+(ℓ = 0.25 m, chosen on validation episodes: docs/baselines.md) whose velocity is linear in u:
 
     ṗ_l = J(θ) u,   J(θ) = [[cos θ, −ℓ sin θ], [sin θ, ℓ cos θ]]
     p_l⁺ = p_l + J(θ) u Δt                                   (next look-ahead point, linear in u)

@@ -35,7 +35,7 @@ class CvarBfConfig(Config):
     rho: Positive = 10.0  # ρ of the dynamic zone's softplus
     v_hat: Positive = 1.0  # [m/s] v̂, speed normalisation of the dynamic zone
     eps_vel: Positive = 0.05  # [m/s] ε_v, regularises ‖v_rel‖ in cos θ_rel
-    lookahead: Positive = 0.15  # [m] ℓ, distance of the controlled point ahead of the centre
+    lookahead: Positive = 0.25  # [m] ℓ, the controlled point ahead of the centre (validation)
     cover_body: bool = False  # inflate every radius by ℓ so the barriers on p_l cover the body
     margin: NonNegative = 0.0  # [m] added to R = r_r + r_h
     wall_margin: NonNegative = 0.0  # [m] added to the wall radius r_r + ℓ
