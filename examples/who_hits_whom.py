@@ -30,7 +30,7 @@ def _speed_before_end(rec: dict[str, Any]) -> float:
     """Mean robot speed [m/s] over the last ``LAST_S`` of the episode."""
     x = np.asarray(rec["series"]["x"], dtype=float)
     y = np.asarray(rec["series"]["y"], dtype=float)
-    k = min(int(round(LAST_S / DT)), len(x) - 1)
+    k = min(round(LAST_S / DT), len(x) - 1)
     if k < 1:
         return float("nan")
     return float(np.hypot(x[-1] - x[-1 - k], y[-1] - y[-1 - k]) / (k * DT))
