@@ -1,20 +1,44 @@
 """The Stable-Baselines3 row: `pioneer train sb3-ppo` end to end with a tiny budget, its policy
-file (no pickle) back as the registry's `sb3-ppo`, and its refusals."""
+file (no pickle) back as the registry's `sb3-ppo`, its checkpoint (no pickle) and resume, and
+its refusals."""
 
 from __future__ import annotations
 
 import csv
 import json
+import random
+import shlex
+import signal
+import zipfile
 
 import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from pioneer.baselines.sb3 import CURVE_COLUMNS, env_id_for, make_sb3_policy
+import torch
+from safetensors.torch import load_file
+
+from pioneer.baselines.sb3 import (
+    CHECKPOINT,
+    CURVE_COLUMNS,
+    _build,
+    _restore,
+    _save_state,
+    env_id_for,
+    make_sb3_policy,
+)
 from pioneer.control.registry import build_policy
 from pioneer.envs.env import NavEnv
-from pioneer_testutils import assert_house_message, run_cli
+from pioneer.registration import register_envs
+from pioneer_testutils import (
+    assert_house_message,
+    file_tree,
+    interrupted_line,
+    one_error_line,
+    run_cli,
+    stop_cli,
+)
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +53,7 @@ def test_the_command_runs_end_to_end_and_writes_every_output(trained):
     out, res = trained
     assert {p.name for p in out.iterdir()} == {
         "policy.safetensors",
+        "checkpoint.safetensors",
         "curve.csv",
         "curve.png",
         "train.json",
@@ -80,9 +105,17 @@ def test_eval_runs_the_trained_policy(trained, tmp_path):
 
 def test_refusals_are_one_line(trained, tmp_path):
     out, _ = trained
-    again = run_cli("train", "sb3-ppo", "--steps", "64", "--out", str(out))
-    assert again.returncode == 2
-    assert_house_message(again.stderr.strip(), "--out: expected a folder without an SB3 run")
+    old = tmp_path / "old"  # a run made before checkpoints: its policy without one
+    old.mkdir()
+    old.joinpath("policy.safetensors").write_bytes((out / "policy.safetensors").read_bytes())
+    before = file_tree(old)
+    again = run_cli("train", "sb3-ppo", "--steps", "64", "--out", str(old))
+    line = one_error_line(again.stderr, again.returncode, "--out", "made before", "new --out")
+    assert_house_message(line)
+    assert file_tree(old) == before
+    resume = run_cli("train", "sb3-ppo", "--steps", "64", "--resume", "--out", str(tmp_path / "n"))
+    one_error_line(resume.stderr, resume.returncode, "--resume", "drop --resume")
+    assert not (tmp_path / "n").exists()
     missing = run_cli(
         "eval", "--policy", "sb3-ppo", "--scenario", "hl-rr", "--out", str(tmp_path / "e")
     )
@@ -99,3 +132,178 @@ def test_scenarios_map_to_their_gymnasium_ids():
     assert env_id_for("hr-rl") == ("pioneer/ElevatorHRRL-v1", {})
     assert env_id_for("hl-rr") == ("pioneer/ElevatorHLRR-v1", {})
     assert env_id_for("hr-rl-compact") == ("pioneer/ElevatorHRRL-v1", {"scenario": "hr-rl-compact"})
+
+
+# ------------------------------------------------------------------------------ resume
+def _sb3(out, steps, *extra):
+    argv = ["train", "sb3-ppo", "--scenario", "hl-rr", "--envs", "1", "--steps", str(steps)]
+    return run_cli(*argv, "--out", str(out), *extra)
+
+
+def _rows(out):
+    return list(csv.reader((out / "curve.csv").open()))[1:]
+
+
+def _metadata(path):
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="pt") as fh:
+        return fh.metadata()
+
+
+@pytest.fixture(scope="module")
+def resumed(tmp_path_factory: pytest.TempPathFactory):
+    """One update (2,048 steps), then the same command with --steps 4096 on the same --out;
+    the folder and its files after the first part."""
+    out = tmp_path_factory.mktemp("sb3-resume") / "run"
+    first = _sb3(out, 2048)
+    assert first.returncode == 0, first.stderr
+    part1 = {p.name: p.read_bytes() for p in out.iterdir()}
+    second = _sb3(out, 4096)
+    assert second.returncode == 0, second.stderr
+    return out, part1
+
+
+def test_a_rerun_with_more_steps_resumes_from_the_checkpoint(resumed, tmp_path):
+    out, part1 = resumed
+    first = tmp_path / "first"
+    first.mkdir()
+    for name, data in part1.items():
+        first.joinpath(name).write_bytes(data)
+    # after the first part the checkpoint holds the weights it wrote as its policy
+    policy, state = load_file(first / "policy.safetensors"), load_file(first / CHECKPOINT)
+    assert policy and all(torch.equal(v, state[f"policy/{k}"]) for k, v in policy.items())
+    summary = json.loads((out / "train.json").read_text())
+    assert summary["env_steps"] == 4096 and summary["resumed_from_steps"] == 2048
+    assert summary["updates"] == 2
+    rows = _rows(out)
+    assert [r[:2] for r in rows] == [["1", "2048"], ["2", "4096"]]
+    assert rows[0] == _rows(first)[0]  # curve.csv kept its row and was appended to
+    assert int(rows[1][2]) == summary["episodes"] >= int(rows[0][2])
+    assert not torch.equal(load_file(out / "policy.safetensors")["log_std"], policy["log_std"])
+    # a finished run: the same command again trains nothing and keeps the weights
+    weights = load_file(out / "policy.safetensors")
+    again = _sb3(out, 4096)
+    assert again.returncode == 0, again.stderr
+    assert (
+        json.loads((out / "train.json").read_text())["env_steps"] == 4096 and len(_rows(out)) == 2
+    )
+    assert all(torch.equal(v, weights[k]) for k, v in load_file(out / "policy.safetensors").items())
+
+
+def _global_rngs():
+    return random.getstate(), np.random.get_state(), torch.get_rng_state()  # noqa: NPY002
+
+
+def _set_global_rngs(states):
+    random.setstate(states[0])
+    np.random.set_state(states[1])  # noqa: NPY002
+    torch.set_rng_state(states[2])
+
+
+def test_the_checkpoint_holds_no_pickle_and_round_trips_the_training_state(resumed, tmp_path):
+    out, _ = resumed
+    ckpt = out / CHECKPOINT
+    raw = ckpt.read_bytes()
+    header = json.loads(raw[8 : 8 + int.from_bytes(raw[:8], "little")])  # safetensors: JSON + data
+    assert not zipfile.is_zipfile(ckpt)  # torch.save writes a zip of pickles
+    dtypes = {v["dtype"] for k, v in header.items() if k != "__metadata__"}
+    assert dtypes <= {"F32", "F64", "I64", "U8"}
+    assert json.loads(header["__metadata__"]["settings"])["n_envs"] == 1
+    stored = load_file(ckpt)
+    saved = _global_rngs()  # building the model and restoring the state set the global RNGs
+    try:
+        register_envs()
+        model, venv = _build("pioneer/ElevatorHLRR-v1", {}, 1, 0)  # a fresh model
+        curve = _restore(ckpt, model)
+        venv.close()
+        assert model.num_timesteps == 4096 and model._n_updates == 20  # 2 updates of 10 epochs
+        assert len(curve.rows) == 2 and len(curve.window) == min(curve.episodes, 100)
+        osd = model.policy.optimizer.state_dict()
+        n_params = len(list(model.policy.parameters()))
+        names = {f"optim/{i}/{k}" for i, st in osd["state"].items() for k in st}
+        assert names == {k for k in stored if k.startswith("optim/")}
+        assert len(names) == 3 * n_params  # exp_avg, exp_avg_sq, step of every parameter
+        for i, st in osd["state"].items():
+            for k, v in st.items():
+                ref = stored[f"optim/{i}/{k}"]
+                assert v.dtype == ref.dtype and torch.equal(v, ref), (i, k)
+        for k, v in model.policy.state_dict().items():
+            assert torch.equal(v, stored[f"policy/{k}"]), k
+        assert torch.equal(torch.get_rng_state(), stored["rng/torch"])
+        key = np.random.get_state()[1]  # noqa: NPY002
+        np.testing.assert_array_equal(key, stored["rng/numpy_key"].numpy())
+        # written again from the restored model: the same tensors and state
+        again = tmp_path / "again.safetensors"
+        settings = json.loads(header["__metadata__"]["settings"])
+        _save_state(again, model, curve, curve.wall, settings)
+        rewritten = load_file(again)
+        assert rewritten.keys() == stored.keys()
+        assert all(torch.equal(rewritten[k], stored[k]) for k in stored), "round trip"
+    finally:
+        _set_global_rngs(saved)
+
+
+@pytest.mark.parametrize(
+    ("extra", "flag"),
+    [
+        (["--envs", "2"], "--envs"),
+        (["--seed", "1"], "--seed"),
+        (["--scenario", "hr-rl"], "--scenario"),
+    ],
+)
+def test_other_settings_on_an_existing_run_are_refused(resumed, extra, flag):
+    out, _ = resumed
+    before = file_tree(out)
+    argv = {"--scenario": "hl-rr", "--envs": "1", "--steps": "6144", "--seed": "0"}
+    argv[extra[0]] = extra[1]
+    res = run_cli("train", "sb3-ppo", *[a for kv in argv.items() for a in kv], "--out", str(out))
+    line = one_error_line(res.stderr, res.returncode, flag, "only --steps may change")
+    assert_house_message(line, f"received {{'{flag}'")
+    assert file_tree(out) == before
+
+
+def test_a_resumed_run_is_reproducible(resumed, tmp_path):
+    """The same run interrupted and resumed at the same step, twice: the same weights, Adam
+    state and RNG states, bit for bit (the curves differ only in their wall times)."""
+    out, _ = resumed
+    copy = tmp_path / "copy"
+    for steps in (2048, 4096):
+        res = _sb3(copy, steps)
+        assert res.returncode == 0, res.stderr
+    for name in ("policy.safetensors", CHECKPOINT):
+        a, b = load_file(out / name), load_file(copy / name)
+        assert a.keys() == b.keys()
+        for k in a.keys() - {"curve"}:
+            assert torch.equal(a[k], b[k]), (name, k)
+    assert [r[:-1] for r in _rows(out)] == [r[:-1] for r in _rows(copy)]
+
+
+@pytest.mark.slow
+def test_a_signal_keeps_the_finished_updates_and_the_rerun_resumes(resumed, tmp_path, capsys):
+    """Ctrl-C during the first update: it finishes, its checkpoint is written, the one line
+    names it; the same command resumes — to the weights of the run resumed at that step."""
+    out = tmp_path / "run"
+    argv = ["train", "sb3-ppo", "--scenario", "hl-rr", "--envs", "1", "--steps", "4096"]
+    argv += ["--out", str(out)]
+
+    def started() -> bool:  # the first rollout is collected: its update runs
+        return (out / "curve.csv").is_file() and len(_rows(out)) >= 1
+
+    stopped = stop_cli(argv, started, signal.SIGINT, tmp_path, group=True)
+    kept = len(_rows(out))
+    with capsys.disabled():
+        print(f"SIGINT: exit {stopped.returncode} in {stopped.seconds:.2f} s, {kept} update kept")
+    stopped.assert_clean(signal.SIGINT)
+    assert interrupted_line(stopped.stderr) == (
+        f"pioneer: interrupted (SIGINT); update {kept} of 2 kept in {out / CHECKPOINT}; "
+        f"resume with: {shlex.join(['pioneer', *argv])}"
+    )
+    state = json.loads(_metadata(out / CHECKPOINT)["counters"])
+    assert state["num_timesteps"] == 2048 * kept
+    res = run_cli(*argv)
+    assert res.returncode == 0, res.stderr
+    assert json.loads((out / "train.json").read_text())["env_steps"] == 4096
+    if kept == 1:  # resumed at step 2,048, as the `resumed` run
+        a, b = load_file(resumed[0] / "policy.safetensors"), load_file(out / "policy.safetensors")
+        assert all(torch.equal(a[k], b[k]) for k in a)

@@ -134,11 +134,11 @@ class TrainCrowdNav:
 @dataclasses.dataclass(frozen=True)
 class TrainSb3:
     """Stable-Baselines3 PPO (its defaults, MlpPolicy) on the Gymnasium environment with the
-    environment's own reward; writes policy.safetensors (no pickle), curve.csv/png, train.json.
-    Needs the sb3 extra."""
+    environment's own reward; writes policy.safetensors and checkpoint.safetensors (no pickle),
+    curve.csv/png, train.json (resumes an existing --out). Needs the sb3 extra."""
 
     out: OutDir
-    """output folder (must not hold an SB3 run)"""
+    """output folder (checkpoint, policy, curve; resumes if it holds a run)"""
     scenario: str = DEFAULT_SCENARIO
     """hr-rl → pioneer/ElevatorHRRL-v1, hl-rr → pioneer/ElevatorHLRR-v1; others by name"""
     steps: int = 1_000_000
@@ -147,15 +147,18 @@ class TrainSb3:
     """environments (SB3's make_vec_env)"""
     seed: Seed = default(train_sb3_ppo, "seed")
     """seeds SB3 and the environments"""
+    resume: Flag = False
+    """require a checkpoint in --out (default: resume if there is one)"""
 
     def run(self) -> int:
-        """Train; print the outputs and the final statistics (JSON lines)."""
+        """Train (or resume); print the outputs and the final statistics (JSON lines)."""
         summary = train_sb3_ppo(
             self.scenario,
             self.out,
             steps=self.steps,
             n_envs=self.envs,
             seed=self.seed,
+            resume=True if self.resume else None,
             command=command_line(),
         )
         print(to_json({"out": self.out, "env_steps": summary["env_steps"]}))
