@@ -584,16 +584,27 @@ def _obs_dim(scenario: str | None) -> int:
     return get_scenario(scenario).sim.lidar.obs_dim if scenario is not None else OBS_DIM
 
 
-def make_sb3_policy(weights: str, scenario: str | None = None, name: str = "sb3-ppo") -> Sb3Policy:
+def make_sb3_policy(
+    weights: str | None = None, scenario: str | None = None, name: str = "sb3-ppo"
+) -> Sb3Policy:
     """Policy factory: the SB3 policy in ``weights`` (a ``policy.safetensors`` written by
-    ``pioneer train sb3-ppo``; ``{scenario}`` is filled in)."""
+    ``pioneer train sb3-ppo``; ``{scenario}`` is filled in), or the scenario's shipped one."""
     import gymnasium as gym
     import torch
     from stable_baselines3.common.policies import ActorCriticPolicy
 
     from pioneer.nn.checkpoint import load_checked, read_checkpoint
 
-    p = Path(weights.format(scenario=scenario) if scenario else weights)
+    if weights is None:
+        if scenario is None:
+            raise ConfigError(
+                expect("sb3-ppo", "weights=FILE or a scenario", None, "pass scenario='hr-rl'")
+            )
+        from pioneer.data import shipped_sb3_weights
+
+        p = shipped_sb3_weights(scenario)
+    else:
+        p = Path(weights.format(scenario=scenario) if scenario else weights)
     fix = "train one with `pioneer train sb3-ppo --out DIR` and pass weights=DIR/policy.safetensors"
     meta, arrays = read_checkpoint(p, SB3_FORMAT, "sb3-ppo weights", fix, fix, tensors=True)
     cfg = meta["config"]

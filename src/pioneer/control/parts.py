@@ -21,12 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from pioneer.data import parts as shipped
-from pioneer.data import shipped_crowdnav_weights, shipped_student_for
+from pioneer.data import shipped_crowdnav_weights, shipped_sb3_weights, shipped_student_for
 
 __all__ = [
     "check_shield",
     "check_teacher",
     "crowdnav_files",
+    "sb3_files",
     "shield_files",
     "student_files",
     "teacher_files",
@@ -93,3 +94,10 @@ def crowdnav_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
     if params.get("weights"):
         return {}
     return {"weights": shipped_crowdnav_weights(scenario, str(params.get("variant", "ppo")))}
+
+
+def sb3_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
+    """Without ``weights``, the scenario's shipped SB3 policy."""
+    if params.get("weights"):
+        return {}
+    return {"weights": shipped_sb3_weights(scenario)}

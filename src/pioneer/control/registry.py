@@ -121,6 +121,7 @@ _OWN = "pioneer.control.parts"
 _TEACHER_PARTS = {"check": f"{_OWN}:check_teacher", "files": f"{_OWN}:teacher_files"}
 _STUDENT_PARTS = {"check": f"{_PARTS}:student", "files": f"{_OWN}:student_files"}
 _CROWDNAV_PARTS = {"check": f"{_PARTS}:crowdnav", "files": f"{_OWN}:crowdnav_files"}
+_SB3_PARTS = {"check": f"{_PARTS}:sb3", "files": f"{_OWN}:sb3_files"}
 _BUILTINS = (
     _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", **_TEACHER_PARTS),
     _builtin(
@@ -178,7 +179,8 @@ _BUILTINS = (
     _builtin(
         "sb3-ppo",
         "pioneer.baselines.sb3:make_sb3_policy",
-        "Stable-Baselines3 PPO on the LiDAR observation (weights=FILE)",
+        "Stable-Baselines3 PPO on the LiDAR observation, SB3's defaults (beyond the paper)",
+        **_SB3_PARTS,
         extra="sb3",
     ),
     _builtin(

@@ -17,6 +17,7 @@ __all__ = [
     "base_scenario",
     "shipped_crowdnav_weights",
     "shipped_demos",
+    "shipped_sb3_weights",
     "shipped_student",
     "shipped_student_for",
 ]
@@ -109,17 +110,28 @@ def shipped_crowdnav_weights(scenario: str, variant: str = "ppo") -> Path:
         raise DataError(
             expect("CrowdNav++ variant", f"one of {sorted(CROWDNAV_VARIANTS)}", variant, "pick one")
         )
-    prefix = CROWDNAV_VARIANTS[variant]
+    return _shipped_baseline(CROWDNAV_VARIANTS[variant], scenario, "CrowdNav++", "crowdnav++")
+
+
+def shipped_sb3_weights(scenario: str) -> Path:
+    """Path of the shipped Stable-Baselines3 PPO policy for ``scenario``
+    (``baselines/sb3-ppo-NAME``, the ``sb3-ppo`` row)."""
+    return _shipped_baseline("sb3-ppo", scenario, "sb3-ppo", "sb3-ppo")
+
+
+def _shipped_baseline(prefix: str, scenario: str, what: str, command: str) -> Path:
+    """``baselines/PREFIX-NAME.safetensors`` for ``scenario``'s base, or one :class:`DataError`
+    naming the files there and how to train one."""
     name = base_scenario(scenario)
     p = BASELINES_DIR / f"{prefix}-{name}.safetensors"
     if not p.is_file():
         names = sorted(q.stem for q in BASELINES_DIR.glob("*.safetensors"))
         raise DataError(
             expect(
-                "CrowdNav++ shipped weights",
+                f"{what} shipped weights",
                 f"one of {names}",
                 f"{prefix}-{name}",
-                f"train them (pioneer train crowdnav++ --scenario {scenario} --out DIR) and "
+                f"train them (pioneer train {command} --scenario {scenario} --out DIR) and "
                 "pass weights=DIR/policy.safetensors",
             )
         )

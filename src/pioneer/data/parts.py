@@ -13,10 +13,11 @@ from typing import Any
 from pioneer.data import (
     shipped_crowdnav_weights,
     shipped_demos,
+    shipped_sb3_weights,
     shipped_student_for,
 )
 
-__all__ = ["crowdnav", "shield", "student", "teacher"]
+__all__ = ["crowdnav", "sb3", "shield", "student", "teacher"]
 
 
 def teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
@@ -43,3 +44,9 @@ def crowdnav(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """Without ``weights`` CrowdNav++ loads the scenario's shipped weights."""
     if not kwargs.get("weights"):
         shipped_crowdnav_weights(scenario, str(kwargs.get("variant", "ppo")))
+
+
+def sb3(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``weights`` the SB3 policy is the scenario's shipped one."""
+    if not kwargs.get("weights"):
+        shipped_sb3_weights(scenario)

@@ -69,9 +69,9 @@ STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger
 PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
-# beyond the paper, in Table I: the teacher without its soft margins (the paper's) and classic
-# references
-CLASSIC = ("teacher-paper", "dwa", "sfm", "goal")
+# beyond the paper, in Table I: the teacher without its soft margins (the paper's), classic
+# references and Stable-Baselines3's PPO with its defaults on the environment's own reward
+CLASSIC = ("teacher-paper", "dwa", "sfm", "goal", "sb3-ppo")
 PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 SEED_ROW = "{name}-s{seed}"  # the row of a student's other DAgger seeds (seed 0: its name)
 # uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
@@ -607,9 +607,8 @@ def _index(
         f"Episodes on {seed_set} seeds (pioneer.seeds). Command: `pioneer reproduce --profile "
         f"{profile}{'' if seed_set == 'evaluation' else ' --seed-set ' + seed_set}`.",
         "",
-        "The CrowdNav++ weights (Table I) were trained before the current demonstrations "
-        "and the mirror-true observation (sector 0 centred on the heading): their row "
-        "measures those weights as shipped, until they are re-learned. The teacher keeps "
+        "The CrowdNav++ and SB3 PPO rows (Table I) are the shipped weights; how they were "
+        "trained: src/pioneer/data/baselines/README.md. The teacher keeps "
         "soft margins to people and walls (docs/teacher.md); `teacher-paper` is the "
         "teacher without them.",
         "",
