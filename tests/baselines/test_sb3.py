@@ -307,3 +307,18 @@ def test_a_signal_keeps_the_finished_updates_and_the_rerun_resumes(resumed, tmp_
     if kept == 1:  # resumed at step 2,048, as the `resumed` run
         a, b = load_file(resumed[0] / "policy.safetensors"), load_file(out / "policy.safetensors")
         assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("scenario", ["hr-rl", "hl-rr"])
+def test_the_shipped_policy_loads_without_weights(scenario):
+    """The `sb3-ppo` row of Table I: the shipped file of each scenario, the files it recorded."""
+    from pioneer.control.parts import sb3_files
+    from pioneer.data import shipped_sb3_weights
+
+    policy = build_policy("sb3-ppo", scenario)
+    env = NavEnv(scenario)
+    obs, info = env.reset(seed=0)
+    policy.reset(info, np.random.default_rng(0))
+    assert env.action_space.contains(policy.act(obs, info).astype(np.float32))
+    assert sb3_files(scenario, {}) == {"weights": shipped_sb3_weights(scenario)}
+    assert sb3_files(scenario, {"weights": "mine.safetensors"}) == {}
