@@ -55,14 +55,15 @@ def rows(records: list[dict[str, Any]]) -> list[str]:
         person_first = sum(1 for q in m if q.get("person_hit") == "person-into-robot")
         exiting = sum(1 for q in m if q.get("person_role") == "exiting")
         boarding = sum(1 for q in m if q.get("person_role") == "boarding")
-        t = np.median([r["time_s"] for r in hits]) if hits else float("nan")
-        v = np.median([_speed_before_end(r) for r in hits if r.get("series")]) if hits else np.nan
+        speeds = [_speed_before_end(r) for r in hits if r.get("series")]
+        t = f"{np.median([r['time_s'] for r in hits]):.1f}" if hits else "–"
+        v = f"{np.median(speeds):.2f}" if speeds else "–"
         sr = sum(1 for r in recs if r["event"] == "success")
         out.append(
             f"| {scenario} | {policy} | {len(recs)} | {100.0 * sr / len(recs):.0f} | "
             f"{100.0 * n / len(recs):.0f} | {_share(wall, n)} | {_share(robot_first, n)} | "
             f"{_share(person_first, n)} | {_share(exiting, n)} | {_share(boarding, n)} | "
-            f"{t:.1f} | {v:.2f} |"
+            f"{t} | {v} |"
         )
     return out
 
