@@ -2,8 +2,9 @@
 
 The CrowdNav family pretrains its RL policies by imitation before RL (Chen et al. 2019,
 CADRL/SARL: value networks initialised by imitation learning on demonstrations). Our PPO-only
-CrowdNav++ runs (2.5 M steps, 1/8 of the original's budget) settle in a local optimum — drive
-to the door and wait — so ``pioneer train crowdnav++ --bc-episodes N`` first imitates the
+CrowdNav++ runs settle in a local optimum — drive toward the door and wait (the compact world
+at 2.5 M steps; the paper world even with the original's 20 M steps: docs/baselines.md) — so
+``pioneer train crowdnav++ --bc-episodes N`` first imitates the
 privileged lookahead teacher (:func:`pioneer.control.teacher.make_teacher`) and then
 fine-tunes with PPO (:mod:`.ppo`). This is a deviation from CrowdNav++, which
 trains by RL alone; docs/baselines.md reports both.
