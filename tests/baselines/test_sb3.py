@@ -116,11 +116,14 @@ def test_refusals_are_one_line(trained, tmp_path):
     resume = run_cli("train", "sb3-ppo", "--steps", "64", "--resume", "--out", str(tmp_path / "n"))
     one_error_line(resume.stderr, resume.returncode, "--resume", "drop --resume")
     assert not (tmp_path / "n").exists()
+    # without weights= the shipped policy is loaded; a missing file is refused before any work
+    gone = str(tmp_path / "gone.safetensors")
     missing = run_cli(
-        "eval", "--policy", "sb3-ppo", "--scenario", "hl-rr", "--out", str(tmp_path / "e")
-    )
+        "eval", "--policy", f"sb3-ppo:weights={gone}", "--scenario", "hl-rr", "--out",
+        str(tmp_path / "e"),
+    )  # fmt: skip
     assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
-    assert "expected a value for ['weights']" in missing.stderr
+    assert "gone.safetensors" in missing.stderr
     assert not (tmp_path / "e").exists()
     bad = tmp_path / "bad.safetensors"
     bad.write_bytes(b"not a safetensors file")
