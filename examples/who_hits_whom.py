@@ -22,18 +22,19 @@ import numpy as np
 
 from pioneer.eval.records import read_records
 
-DT = 0.1  # [s] the simulator's step: one series entry per state
 LAST_S = 0.5  # [s] the window of the robot's speed before contact
 
 
 def _speed_before_end(rec: dict[str, Any]) -> float:
-    """Mean robot speed [m/s] over the last ``LAST_S`` of the episode."""
+    """Mean robot speed [m/s] over the last ``LAST_S`` of the episode (the step length from the
+    record: its time over its states, one series entry per state)."""
     x = np.asarray(rec["series"]["x"], dtype=float)
     y = np.asarray(rec["series"]["y"], dtype=float)
-    k = min(round(LAST_S / DT), len(x) - 1)
-    if k < 1:
+    if len(x) < 2:
         return float("nan")
-    return float(np.hypot(x[-1] - x[-1 - k], y[-1] - y[-1 - k]) / (k * DT))
+    dt = float(rec["time_s"]) / (len(x) - 1)
+    k = min(round(LAST_S / dt), len(x) - 1)
+    return float(np.hypot(x[-1] - x[-1 - k], y[-1] - y[-1 - k]) / (k * dt))
 
 
 def _share(part: int, whole: int) -> str:

@@ -305,14 +305,14 @@ def _save_state(
     import torch
     from safetensors.torch import save
 
+    from pioneer.nn.checkpoint import optimizer_tensors
+
     tensors: dict[str, torch.Tensor] = {
         f"policy/{k}": v.detach().cpu().clone().contiguous()
         for k, v in model.policy.state_dict().items()
     }
     osd = model.policy.optimizer.state_dict()
-    for i, st in osd["state"].items():
-        for k, v in st.items():
-            tensors[f"optim/{i}/{k}"] = torch.as_tensor(v).detach().cpu().clone().contiguous()
+    tensors.update(optimizer_tensors(osd, "optim"))
     tensors["rng/torch"] = torch.get_rng_state()
     rng = np.random.get_state(legacy=False)  # noqa: NPY002 (SB3's generator: saved, not drawn)
     if not isinstance(rng, dict):
@@ -355,16 +355,9 @@ _FIX = "use a new --out (the checkpoint is corrupt or of another kind)"
 def _read_state(path: Path, tensors: bool) -> tuple[dict[str, str], dict[str, Any]]:
     """The metadata (and with ``tensors`` the tensors) of the checkpoint at ``path``; one that
     cannot be read or is of another format raises one :class:`DataError`."""
-    from safetensors import SafetensorError, safe_open
+    from pioneer.nn.checkpoint import read_training_state
 
-    try:
-        with safe_open(str(path), framework="pt") as fh:
-            meta = dict(fh.metadata() or {})
-            arrays = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118
-    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
-        raise DataError(expect(f"checkpoint {path}", "a readable file", str(exc), _FIX)) from exc
-    if meta.get("format") != TRAIN_FORMAT:
-        raise DataError(expect(f"{path}: format", TRAIN_FORMAT, meta.get("format"), _FIX))
+    meta, arrays = read_training_state(path, TRAIN_FORMAT, _FIX, tensors)
     try:
         if not isinstance(json.loads(meta["settings"]), dict):
             raise ValueError("not an object")
@@ -381,18 +374,16 @@ def _restore(path: Path, model: Any) -> _CurveState:
     :class:`DataError`."""
     import torch
 
+    from pioneer.nn.checkpoint import optimizer_state
+
     meta, t = _read_state(path, tensors=True)
     try:
         model.policy.load_state_dict(
             {k.removeprefix("policy/"): v for k, v in t.items() if k.startswith("policy/")},
             strict=True,
         )
-        osd: dict[str, Any] = {"state": {}, "param_groups": json.loads(meta["param_groups"])}
-        for k, v in t.items():
-            if k.startswith("optim/"):
-                _, i, name = k.split("/")
-                osd["state"].setdefault(int(i), {})[name] = v
-        model.policy.optimizer.load_state_dict(osd)
+        groups = json.loads(meta["param_groups"])
+        model.policy.optimizer.load_state_dict(optimizer_state(t, "optim", groups))
         torch.set_rng_state(t["rng/torch"])
         rng = json.loads(meta["rng_numpy"])
         np.random.set_state(  # noqa: NPY002 (SB3's generator: restored, not drawn)

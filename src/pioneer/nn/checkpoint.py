@@ -1,6 +1,7 @@
 """Safetensors checkpoints of torch modules with a typed config: one writer and one reader for
 the students and CrowdNav++ (weights as tensors; format tag, config and free-form ``info`` as
-JSON in the file's metadata — loading cannot execute code)."""
+JSON in the file's metadata — loading cannot execute code). For the resumable trainers
+(CrowdNav++'s PPO, SB3's): a training-state reader and an optimizer's state as named tensors."""
 
 from __future__ import annotations
 
@@ -16,7 +17,15 @@ from pioneer.config import Config
 from pioneer.errors import DataError, PioneerError, expect
 from pioneer.io import atomic_path, to_json
 
-__all__ = ["load_checked", "read_checkpoint", "stored_config", "write_checkpoint"]
+__all__ = [
+    "load_checked",
+    "optimizer_state",
+    "optimizer_tensors",
+    "read_checkpoint",
+    "read_training_state",
+    "stored_config",
+    "write_checkpoint",
+]
 
 M = TypeVar("M", bound=nn.Module)
 C = TypeVar("C", bound=Config)
@@ -117,3 +126,44 @@ def load_checked(
             raise DataError(expect(f"{p}: {k}", "finite float32", str(v.dtype), fix))
     model.load_state_dict(dict(arrays), strict=True)
     return model.eval()
+
+
+def optimizer_tensors(state: Mapping[str, Any], prefix: str) -> dict[str, torch.Tensor]:
+    """An optimizer's ``state_dict()`` per-parameter state as tensors named
+    ``PREFIX/INDEX/NAME`` (its ``param_groups`` are plain JSON: store them beside)."""
+    return {
+        f"{prefix}/{i}/{k}": torch.as_tensor(v).detach().cpu().clone().contiguous()
+        for i, st in state["state"].items()
+        for k, v in st.items()
+    }
+
+
+def optimizer_state(
+    tensors: Mapping[str, torch.Tensor], prefix: str, param_groups: Any
+) -> dict[str, Any]:
+    """The ``state_dict`` that :func:`optimizer_tensors` stored under ``prefix``, with its
+    ``param_groups``, for the optimizer's ``load_state_dict``."""
+    out: dict[str, Any] = {"state": {}, "param_groups": param_groups}
+    for k, v in tensors.items():
+        if k.startswith(f"{prefix}/"):
+            _, i, name = k.split("/")
+            out["state"].setdefault(int(i), {})[name] = v
+    return out
+
+
+def read_training_state(
+    path: Path, fmt: str, fix: str, tensors: bool = True
+) -> tuple[dict[str, str], dict[str, torch.Tensor]]:
+    """The raw metadata (and with ``tensors`` the tensors) of a trainer's checkpoint; a file
+    that cannot be read or is of another format than ``fmt`` raises one :class:`DataError`."""
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(path), framework="pt") as fh:
+            meta = dict(fh.metadata() or {})
+            arrays = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118
+    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+        raise DataError(expect(f"checkpoint {path}", "a readable file", str(exc), fix)) from exc
+    if meta.get("format") != fmt:
+        raise DataError(expect(f"{path}: format", fmt, meta.get("format"), fix))
+    return meta, arrays

@@ -23,8 +23,9 @@ from pioneer.baselines.crowdnav.observation import (
 )
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
 from pioneer.config import Config
-from pioneer.errors import ConfigError, DataError, expect
+from pioneer.errors import ConfigError, expect
 from pioneer.io import atomic_path
+from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
@@ -336,13 +337,9 @@ class _Trainer:
             for k, v in self.model.state_dict().items()
         }
         osd = self.opt.state_dict()
-        for i, st in osd["state"].items():
-            for k, v in st.items():
-                tensors[f"optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        tensors.update(optimizer_tensors(osd, "optim"))
         cosd = self.critic_opt.state_dict()
-        for i, st in cosd["state"].items():
-            for k, v in st.items():
-                tensors[f"critic_optim/{i}/{k}"] = torch.as_tensor(v).clone().contiguous()
+        tensors.update(optimizer_tensors(cosd, "critic_optim"))
         for k in _STATE_FIELDS:
             tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
         tensors["train/h"] = self.h.clone().contiguous()
@@ -375,17 +372,8 @@ class _Trainer:
 
     def load(self, path: Path) -> None:
         """Restore the state written by :meth:`save` (settings must match this trainer's)."""
-        from safetensors import SafetensorError, safe_open
-
         fix = "point --out at a new folder (the checkpoint is corrupt or of another kind)"
-        try:
-            with safe_open(str(path), framework="pt") as fh:
-                meta = dict(fh.metadata() or {})
-                t = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118
-        except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
-            raise DataError(expect(f"checkpoint {path}", "a readable file", str(exc), fix)) from exc
-        if meta.get("format") != TRAIN_FORMAT:
-            raise DataError(expect(f"{path}: format", TRAIN_FORMAT, meta.get("format"), fix))
+        meta, t = read_training_state(path, TRAIN_FORMAT, fix)
         stored = _flat(json.loads(meta["settings"]))
         mine = _flat(self.settings())
         diff = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k))
@@ -401,22 +389,10 @@ class _Trainer:
         self.model.load_state_dict(
             {k[len("model/") :]: v for k, v in t.items() if k.startswith("model/")}, strict=True
         )
-        osd: dict[str, Any] = {"state": {}, "param_groups": json.loads(meta["param_groups"])}
-        for k, v in t.items():
-            if k.startswith("optim/"):
-                _, i, name = k.split("/")
-                osd["state"].setdefault(int(i), {})[name] = v
-        self.opt.load_state_dict(osd)
+        self.opt.load_state_dict(optimizer_state(t, "optim", json.loads(meta["param_groups"])))
         if "critic_param_groups" in meta:
-            cosd: dict[str, Any] = {
-                "state": {},
-                "param_groups": json.loads(meta["critic_param_groups"]),
-            }
-            for k, v in t.items():
-                if k.startswith("critic_optim/"):
-                    _, i, name = k.split("/")
-                    cosd["state"].setdefault(int(i), {})[name] = v
-            self.critic_opt.load_state_dict(cosd)
+            groups = json.loads(meta["critic_param_groups"])
+            self.critic_opt.load_state_dict(optimizer_state(t, "critic_optim", groups))
         self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _STATE_FIELDS})
         self.h = t["train/h"].clone()
         self.start = t["train/start"].numpy().copy()
