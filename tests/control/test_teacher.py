@@ -301,6 +301,24 @@ def test_a_soft_wall_margin_keeps_the_choice_off_the_walls():
     assert d.index == int(np.argmax(np.where(keep, plain.scores(world, state), -np.inf)))
 
 
+def test_margin_tiers_keep_the_largest_fraction_of_the_margins_some_candidate_keeps():
+    world, state = _beside_the_route()
+    plain = LookaheadTeacher(None, config=NO_MARGINS)
+    ro = _rollout_of(plain, world, state)
+    best_gap = float(ro.min_gap[~ro.collided].max())
+    margin = 1.5 * best_gap  # no candidate keeps it; some keep its 3/4 and 1/2
+    one = LookaheadTeacher(None, config=TeacherConfig(margins=SoftMargins(human=margin, tiers=1)))
+    assert one.decide(world, state).index == plain.decide(world, state).index  # all feasible
+    tiered = LookaheadTeacher(
+        None, config=TeacherConfig(margins=SoftMargins(human=margin, tiers=4))
+    )
+    assert tiered.config.margins.factors() == (1.0, 0.75, 0.5, 0.25)
+    d = tiered.decide(world, state)
+    keep = ~ro.collided & (ro.min_gap >= 0.5 * margin)  # 3/4 · 1.5 > 1: kept by none
+    assert keep.any() and not (~ro.collided & (ro.min_gap >= 0.75 * margin)).any()
+    assert d.index == int(np.argmax(np.where(keep, plain.scores(world, state), -np.inf)))
+
+
 def test_make_teacher_passes_its_soft_margins():
     t = make_teacher("hr-rl", density=False, human_margin=0.1, wall_margin=0.05)
     assert t.config.margins == SoftMargins(human=0.1, wall=0.05)

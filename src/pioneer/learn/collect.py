@@ -36,7 +36,11 @@ def _teacher(scenario: str, reward: str, margins: SoftMargins) -> Any:
         from pioneer.control.teacher import make_teacher
 
         _CACHE[key] = make_teacher(
-            scenario, reward=reward, human_margin=margins.human, wall_margin=margins.wall
+            scenario,
+            reward=reward,
+            human_margin=margins.human,
+            wall_margin=margins.wall,
+            margin_tiers=margins.tiers,
         )
     return _CACHE[key]
 
