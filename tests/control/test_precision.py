@@ -86,8 +86,8 @@ def test_recorded_inputs_are_the_teachers_own(recorded):
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_float32_rays_choose_the_reference_candidate(recorded, scenario):
-    """The issue's acceptance on a small recorded set: the same candidate in >= 99 % of the
-    states, and where not, a reference-score loss below the stated tolerance."""
+    """The acceptance of float32 rays on a small recorded set: the same candidate in >= 99 %
+    of the states, and where not, a reference-score loss below the stated tolerance."""
     report = compare_precision(make_teacher(scenario), recorded[scenario])
     assert report.n_states == len(recorded[scenario]) >= 100
     assert report.same_share >= MIN_SAME_SHARE, report.summary()

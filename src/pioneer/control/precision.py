@@ -39,15 +39,15 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 
-# What "the same teacher" means (the issue's acceptance): the same candidate in at least 99 %
-# of states, and where not, a choice whose reference score is less than SCORE_TOLERANCE below
-# the reference choice's. The scores are sums of terms of order 1 (pioneer.reward.rules).
-# Float32 rounding alone moves a score by ~1e-7; what moves it more is a beam that grazes a
-# person (or a wall's end) so closely that it hits in one precision and misses in the other
-# (the discontinuity the reference has too, only narrower), by a few hundredths at most in
-# the measured sets (docs/performance.md). A differing choice loses at most the two
-# candidates' changes: the tolerance admits one such flip; a systematic error would show in
-# the share.
+# What "the same teacher" means (what a switch of precision must keep): the same candidate
+# in at least 99 % of states, and where not, a choice whose reference score is less than
+# SCORE_TOLERANCE below the reference choice's. The scores are sums of terms of order 1
+# (pioneer.reward.rules). Float32 rounding alone moves a score by ~1e-7; what moves it more
+# is a beam that grazes a person (or a wall's end) so closely that it hits in one precision
+# and misses in the other (the discontinuity the reference has too, only narrower), by a few
+# hundredths at most in the measured sets (docs/performance.md). A differing choice loses at
+# most the two candidates' changes: the tolerance admits one such flip; a systematic error
+# would show in the share.
 MIN_SAME_SHARE = 0.99
 SCORE_TOLERANCE = 0.05
 
