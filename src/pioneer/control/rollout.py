@@ -14,8 +14,8 @@ keeps stepping colliding candidates.
 
 The rollout states are observed with the reference float64 ray casting, or with float32 beam
 loops (``precision="float32"``, docs/performance.md "Float32 rays for the teacher"): the
-observations (float32 either way) then differ in the last bits, and the teacher's choice in
-a few states in a thousand (:mod:`pioneer.control.precision`).
+observations (float32 either way) then differ in the last bits, and the teacher's choice
+only where candidates nearly tie (:mod:`pioneer.control.precision` measures how often).
 """
 
 from __future__ import annotations

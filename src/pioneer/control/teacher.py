@@ -78,7 +78,7 @@ class TeacherConfig(Config):
     dt: Positive = STEP  # [s] rollout step Δt
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
     # The ray casting that observes the rollouts: "float64" (the reference) or "float32"
-    # (faster; the same choice in >= 99 % of states: pioneer.control.precision).
+    # (faster; checked against the reference by pioneer.control.precision).
     precision: RayPrecision = RAY_PRECISION
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
