@@ -50,6 +50,7 @@ class Plan:
     fit_repeats: int = 7
     fit_large_repeats: int = 3
     cvar_episodes: int = 4
+    equivalence_seeds: int = 8  # teacher episodes per scenario in teacher_equivalence (work)
     vec_steps: int = 100  # vector steps per timed run (x num_envs env steps)
     vec_repeats: int = 11
 
@@ -107,6 +108,12 @@ def metric(
         m["target"] = f"{op} {value:g} {unit}"
         m["passed"] = bool(ok)
     return m
+
+
+def median_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    """The median over rounds of ``a / b``: a speed-up of b over a, when both were timed in the
+    same rounds (:func:`time_cases`: round k of each from the same time window)."""
+    return float(np.median(np.asarray(a) / np.asarray(b)))
 
 
 def best(m: dict[str, Any]) -> float:

@@ -1,5 +1,6 @@
 """Deciding: the density reward (``density_fit``, ``density_eval``), one lookahead-teacher
-decision and its pieces (``teacher_decision``), and CVaR-BF over episodes
+decision and its pieces with float64 and float32 rays (``teacher_decision``), whether float32
+rays change the teacher's choices (``teacher_equivalence``), and CVaR-BF over episodes
 (``cvar_bf_decision``); :func:`episode_decision_times` also serves CrowdNav++ (learn.py)."""
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from benchmarks.common import (
     Plan,
     Result,
     elevator_setup,
+    median_ratio,
     metric,
     sgemm_256_case,
     time_cases,
@@ -75,15 +77,20 @@ def bench_teacher_decision(plan: Plan) -> Result:
     and the same pieces alone (the rollout = its 10 steps in one kernel call + the observation
     of the 1,200 states), to show where the time goes; with the decision's ratio to the
     host probe's GEMM (256³ float32), timed in the same rounds, so that a busy host does not
-    decide the verdict."""
+    decide the verdict. Beside them, in the same rounds, the teacher with float32 rays
+    (``TeacherConfig.precision``): its decision, its decisions along the episode and its
+    observation, and the speed-ups (the median over rounds of reference ÷ float32)."""
+    from pioneer.control.precision import with_precision
     from pioneer.control.rollout import rollout
-    from pioneer.control.teacher import make_teacher
+    from pioneer.control.teacher import LookaheadTeacher, make_teacher
     from pioneer.reward.features import feature_map
     from pioneer.sim.world import advance
 
     _, world, state = elevator_setup(SEED + 30)
     teacher = make_teacher(SCENARIO)
     teacher.decide(world, state)
+    teacher32 = with_precision(teacher, "float32")
+    teacher32.decide(world, state)
     ro = rollout(world, state, teacher.candidates)
     copies = state.repeat(teacher.candidates.shape[0])
     steps = ro.robot.shape[1]
@@ -93,13 +100,16 @@ def bench_teacher_decision(plan: Plan) -> Result:
     density = teacher.density
     visited = _teacher_episode_states(SEED + 31, every=10)
 
-    def decide_along(_: object) -> None:
-        for w, s in visited:
-            teacher.decide(w, s)
+    def along(t: LookaheadTeacher) -> Callable[[object], None]:
+        def decide_along(_: object) -> None:
+            for w, s in visited:
+                t.decide(w, s)
+
+        return decide_along
 
     cases = {
         "decision": Case(lambda _: teacher.decide(world, state)),
-        "episode": Case(decide_along),
+        "episode": Case(along(teacher)),
         "rollout": Case(lambda _: rollout(world, state, teacher.candidates)),
         "steps": Case(
             lambda _: advance(world, copies, teacher.candidates, teacher.config.dt, steps)
@@ -107,9 +117,15 @@ def bench_teacher_decision(plan: Plan) -> Result:
         "observe": Case(lambda _: trajectory.observations(world)),
         "density": Case(lambda _: density(feats)),
         "gemm": sgemm_256_case(),
+        "decision_f32": Case(lambda _: teacher32.decide(world, state)),
+        "episode_f32": Case(along(teacher32)),
+        "observe_f32": Case(lambda _: trajectory.observations(world, precision="float32")),
     }
     secs = time_cases(cases, plan.batch_repeats, warmup=3)
     ratio = float(np.median(secs["decision"]) / np.median(secs["gemm"]))
+    ratio_episode = float(np.median(secs["episode"] / len(visited)) / np.median(secs["gemm"]))
+    ratio32 = float(np.median(secs["decision_f32"]) / np.median(secs["gemm"]))
+    ratio32_episode = float(np.median(secs["episode_f32"] / len(visited)) / np.median(secs["gemm"]))
     inducing = int(density.alpha_.shape[0])  # type: ignore[union-attr]
     flops = 2 * feats.shape[0] * inducing * feats.shape[1]
     return {
@@ -121,7 +137,24 @@ def bench_teacher_decision(plan: Plan) -> Result:
             "ms_rollout_observe": metric(secs["observe"] * 1e3, "ms"),
             "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
             "ratio_decision_over_sgemm_256": metric([ratio], "x", ("<=", 12.0)),
+            "ratio_decision_episode_mean_over_sgemm_256": metric([ratio_episode], "x"),
             "ms_sgemm_256": metric(secs["gemm"] * 1e3, "ms"),
+            "ms_decision_float32": metric(secs["decision_f32"] * 1e3, "ms"),
+            "ms_decision_episode_mean_float32": metric(
+                secs["episode_f32"] * 1e3 / len(visited), "ms"
+            ),
+            "ms_rollout_observe_float32": metric(secs["observe_f32"] * 1e3, "ms"),
+            "ratio_decision_float32_over_sgemm_256": metric([ratio32], "x"),
+            "ratio_decision_episode_mean_float32_over_sgemm_256": metric([ratio32_episode], "x"),
+            "x_speedup_float32_decision": metric(
+                [median_ratio(secs["decision"], secs["decision_f32"])], "x"
+            ),
+            "x_speedup_float32_episode": metric(
+                [median_ratio(secs["episode"], secs["episode_f32"])], "x"
+            ),
+            "x_speedup_float32_observe": metric(
+                [median_ratio(secs["observe"], secs["observe_f32"])], "x"
+            ),
         },
         "info": {
             "episode_states": f"{len(visited)} states, every 10th of a teacher episode "
@@ -130,6 +163,46 @@ def bench_teacher_decision(plan: Plan) -> Result:
             "inducing": inducing,
             "density_matmul_mflop": flops / 1e6,
             "blas_threads": "1 (threadpoolctl, as the CLI and workers run)",
+        },
+    }
+
+
+def bench_teacher_equivalence(plan: Plan) -> Result:
+    """Does the teacher with float32 rays choose what the float64 reference chooses? Over the
+    decision inputs of ``plan.equivalence_seeds`` seeded reference-teacher episodes in each of
+    HR-RL and HL-RR (every state: a few thousand), the share of states with the same candidate
+    (target >= 99 %) and, where not, the reference-score loss of the float32 choice (target <
+    the stated tolerance), by :func:`pioneer.control.precision.compare_precision`."""
+    from pioneer.control.precision import (
+        MIN_SAME_SHARE,
+        SCORE_TOLERANCE,
+        compare_precision,
+        record_decision_inputs,
+    )
+    from pioneer.control.teacher import make_teacher
+
+    seeds = range(SEED + 50, SEED + 50 + plan.equivalence_seeds)
+    reports = {
+        scenario: compare_precision(make_teacher(scenario), record_decision_inputs(scenario, seeds))
+        for scenario in ("hr-rl", "hl-rr")
+    }
+    n_states = sum(r.n_states for r in reports.values())
+    n_same = sum(r.n_same for r in reports.values())
+    loss = max(r.max_score_loss for r in reports.values())
+    change = max(r.max_score_change for r in reports.values())
+    return {
+        "metrics": {
+            "pct_same_candidate": metric(
+                [100.0 * n_same / n_states], "%", (">=", 100.0 * MIN_SAME_SHARE)
+            ),
+            "max_score_loss": metric([loss], "score", ("<", SCORE_TOLERANCE)),
+            "max_score_change": metric([change], "score"),
+        },
+        "info": {
+            "states": n_states,
+            "seeds": f"{seeds.start}..{seeds.stop - 1} in each scenario",
+            "per_scenario": {k: r.summary() for k, r in reports.items()},
+            "differing_states": {k: list(r.differing) for k, r in reports.items()},
         },
     }
 

@@ -21,9 +21,13 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``env_step``            Gymnasium env steps/s, raw and ``gym.make``-wrapped   >= 5,000 /s
 - ``pysocialforce_step``  the same scene in the ``pysocialforce`` package, and ours/theirs
 - ``raycast_batch``       ``cast_rays`` for 1,200 poses x 72 beams              <= 2 ms
+                          (and in float32 beside it: the speed-up)
 - ``world_step_batch``    ``step`` on 120 copies x 10 steps of 0.3 s            <= 3 ms
 - ``teacher_decision``    one lookahead-teacher decision (120 x 10 rollouts)   <= 10 ms
                           and its ratio to the host probe's GEMM (256³ float32) <= 12
+                          (float64 rays; float32 rays beside them: speed-ups)
+- ``teacher_equivalence`` float32 vs float64 rays over ≈ 2,300 teacher states: the
+                          same candidate in >= 99 %, score loss elsewhere < 0.05
 - ``student_decision``    student scan → command via ONNX Runtime              <= 0.2 ms
                           obs → command via PyTorch                            <= 1 ms
                           and the teacher/student decision-time ratio
@@ -89,6 +93,7 @@ BENCHMARKS: dict[str, Callable[[Plan], Result]] = {
     "density_fit": control.bench_density_fit,
     "density_eval": control.bench_density_eval,
     "teacher_decision": control.bench_teacher_decision,
+    "teacher_equivalence": control.bench_teacher_equivalence,
     "cvar_bf_decision": control.bench_cvar_bf_decision,
     "student_decision": learn.bench_student_decision,
     "deploy_memory": memory.bench_deploy_memory,

@@ -18,6 +18,7 @@ from benchmarks.common import (
     elevator_setup,
     env_case,
     log,
+    median_ratio,
     metric,
     seeded_actions,
     time_cases,
@@ -28,6 +29,7 @@ from pioneer.sim import (
     State,
     World,
     cast_rays,
+    cast_rays_into,
     observation_from_ranges,
     observe,
     scan,
@@ -169,7 +171,8 @@ def elevator_poses(n: int, seed: int, margin: float) -> np.ndarray:
 
 
 def bench_raycast_batch(plan: Plan) -> Result:
-    """``cast_rays`` for 1,200 poses x 72 beams, 3 humans per pose."""
+    """``cast_rays`` for 1,200 poses x 72 beams, 3 humans per pose; beside it, in the same
+    rounds, ``cast_rays_into`` with float32 beam loops (the teacher's float32 rays)."""
     n_poses = 1200
     scenario, world, state = elevator_setup(SEED + 3)
     lid = scenario.sim.lidar
@@ -180,15 +183,24 @@ def bench_raycast_batch(plan: Plan) -> Result:
     out = cast_rays(poses, circles, walls, lid.n_beams, lid.max_range)
     assert out.shape == (n_poses, lid.n_beams), out.shape
 
+    out32 = np.empty((n_poses, lid.n_beams), dtype=np.float32)
+
     def run(_: object) -> None:
         cast_rays(poses, circles, walls, lid.n_beams, lid.max_range)
 
-    secs = time_cases({"cast_rays": Case(run)}, plan.raycast_repeats, warmup=3)["cast_rays"]
+    def run32(_: object) -> None:
+        cast_rays_into(poses, circles, walls, lid.max_range, out32)
+
+    cases = {"cast_rays": Case(run), "float32": Case(run32)}
+    timed = time_cases(cases, plan.raycast_repeats, warmup=3)
+    secs, secs32 = timed["cast_rays"], timed["float32"]
     rays = n_poses * lid.n_beams
     return {
         "metrics": {
             "ms_per_call": metric(secs * 1e3, "ms", ("<=", 2.0)),
             "ns_per_ray": metric(secs / rays * 1e9, "ns"),
+            "ms_per_call_float32": metric(secs32 * 1e3, "ms"),
+            "x_speedup_float32": metric([median_ratio(secs, secs32)], "x"),
         },
         "info": {
             "poses": n_poses,

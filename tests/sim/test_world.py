@@ -393,6 +393,29 @@ def test_observe_states_equals_observing_each_state():
         observe_states(world, [states[0], states[1].take(0)])
 
 
+def test_float32_observations_of_a_trace_are_those_of_its_states():
+    """The rollout observations with float32 rays (the teacher's option) come from one path:
+    a trace's equal ``observe_states`` of its states in float32, bit for bit, and stay
+    within the last bits of the float64 reference (``observe`` keeps float64)."""
+    scenario = get_scenario("hr-rl")
+    world = scenario.world()
+    rng = np.random.default_rng(12)
+    s0 = sample_state(scenario, rng).repeat(8)
+    u = rng.uniform(-1.0, 1.0, (8, 2))
+    tr = advance(world, s0, u, dt=0.3, n_steps=5)
+    s, states = s0, []
+    for _ in range(5):
+        s = step(world, s, u, dt=0.3)
+        states.append(s)
+    f32 = tr.observations(world, precision="float32")
+    np.testing.assert_array_equal(
+        f32, observe_states(world, states, precision="float32").transpose(1, 0, 2)
+    )
+    ref = tr.observations(world)
+    np.testing.assert_array_equal(ref, np.stack([observe(world, x) for x in states], axis=1))
+    assert np.isclose(f32, ref, rtol=0.0, atol=1e-3).mean() > 0.999  # a grazing beam may flip
+
+
 @pytest.mark.parametrize("name", ["hr-rl", "hl-rr", "hr-rl-compact"])
 def test_advance_equals_repeated_steps_bit_for_bit(name):
     """``advance`` (one kernel call for L steps, recording each) gives exactly the states,

@@ -11,6 +11,11 @@ it at its collision step: its records after that step repeat the collision state
 of the teacher's copy-steps in the paper world are not simulated or observed; every
 non-colliding candidate's rollout is the same, bit for bit). The constant-velocity option
 keeps stepping colliding candidates.
+
+The rollout states are observed with the reference float64 ray casting, or with float32 beam
+loops (``precision="float32"``, docs/performance.md "Float32 rays for the teacher"): the
+observations (float32 either way) then differ in the last bits, and the teacher's choice
+only where candidates nearly tie (:mod:`pioneer.control.precision` measures how often).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
+from pioneer.sim.lidar import RAY_PRECISION, RayPrecision, ray_dtype
 from pioneer.sim.world import State, World, advance, observe_states, step
 
 __all__ = ["HORIZON", "HUMAN_MODEL", "STEP", "HumanModel", "Rollout", "rollout"]
@@ -81,8 +87,10 @@ def rollout(
     horizon: float = HORIZON,
     dt: float = STEP,
     human_model: HumanModel = HUMAN_MODEL,
+    precision: RayPrecision = RAY_PRECISION,
 ) -> Rollout:
-    """Roll every command of ``commands (C, 2)`` forward from ``state`` (B = 1)."""
+    """Roll every command of ``commands (C, 2)`` forward from ``state`` (B = 1); ``precision``
+    is that of the ray casting that observes the rollout states (module docstring)."""
     if state.batch_size != 1:
         raise ConfigError(
             expect("rollout state", "a single state (B = 1)", state.batch_size, "take(i)")
@@ -91,6 +99,7 @@ def rollout(
         raise ConfigError(
             expect("human_model", "'privileged' or 'constant_velocity'", human_model, "pick one")
         )
+    ray_dtype(precision)  # an unknown precision is refused here, not when observing
     n_steps = math.floor(horizon / dt + 1e-9)
     if n_steps < 1:
         raise ConfigError(
@@ -103,7 +112,8 @@ def rollout(
         hit = tr.final.collided
         return Rollout(
             commands, tr.poses, hit.copy(), tr.gap, tr.wall_gap, tr.final,
-            np.where(hit, tr.live_steps, n_steps + 1), functools.partial(tr.observations, world),
+            np.where(hit, tr.live_steps, n_steps + 1),
+            functools.partial(tr.observations, world, precision=precision),
         )  # fmt: skip
     # Constant velocity: freeze the social-force model and move the humans along their current
     # velocity after each step, then check the robot against the moved humans too.
@@ -128,7 +138,8 @@ def rollout(
         states.append(s)
         np.minimum(clear, s.gap, out=clear)
         np.minimum(wclear, s.wall_gap, out=wclear)
-    obs = np.ascontiguousarray(observe_states(world, states).transpose(1, 0, 2))  # (C, L, 29)
+    obs = observe_states(world, states, precision)
+    obs = np.ascontiguousarray(obs.transpose(1, 0, 2))  # (C, L, 29)
     return Rollout(
         commands, robot, s.collided.copy(), clear, wclear, s, first,
         lambda which: obs if which is None else obs[which],

@@ -38,6 +38,7 @@ from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
+from pioneer.sim.lidar import RAY_PRECISION, RayPrecision
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
 
@@ -85,6 +86,9 @@ class TeacherConfig(Config):
     horizon: Positive = HORIZON  # [s] T
     dt: Positive = STEP  # [s] rollout step Δt
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
+    # The ray casting that observes the rollouts: "float64" (the reference) or "float32"
+    # (faster; checked against the reference by pioneer.control.precision).
+    precision: RayPrecision = RAY_PRECISION
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
     margins: SoftMargins = SoftMargins()  # gaps preferred among the feasible candidates
@@ -190,7 +194,9 @@ class LookaheadTeacher:
         stop = np.zeros(2)
         if cfg.fallback == "stop":
             return stop
-        still = rollout(world, state, stop[None], cfg.horizon, cfg.dt, cfg.human_model)
+        still = rollout(
+            world, state, stop[None], cfg.horizon, cfg.dt, cfg.human_model, cfg.precision
+        )
         if not still.collided[0]:
             return stop
         latest = sc.collision_step.max()
@@ -208,7 +214,9 @@ class LookaheadTeacher:
     def _score(self, world: World, state: State) -> _Scores:
         cfg = self.config
         w = cfg.weights
-        ro = rollout(world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model)
+        ro = rollout(
+            world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model, cfg.precision
+        )
         c, n_l = ro.robot.shape[:2]
         d_total = float(np.linalg.norm(state.goal[0] - state.start[0]))
         d_goal = ro.final_goal_distance

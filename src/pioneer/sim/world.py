@@ -27,7 +27,15 @@ from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE, SocialForceConfig
 from pioneer.sim.kernel import step_kernel, trajectory_kernel
-from pioneer.sim.lidar import LidarConfig, cast_rays, observation_from_ranges
+from pioneer.sim.lidar import (
+    RAY_PRECISION,
+    LidarConfig,
+    RayPrecision,
+    cast_rays,
+    cast_rays_into,
+    observation_from_ranges,
+    ray_dtype,
+)
 from pioneer.sim.robot import RobotConfig, validate_command
 
 __all__ = [
@@ -253,12 +261,16 @@ class WorldTrace:
     live_steps: NDArray[np.int64]  # (B,) distinct records per copy: L, or 1 + its collision step
 
     def observations(
-        self, world: World, which: NDArray[np.bool_] | None = None
+        self,
+        world: World,
+        which: NDArray[np.bool_] | None = None,
+        precision: RayPrecision = RAY_PRECISION,
     ) -> NDArray[np.float32]:
         """The noise-free observation after every step, ``(B, L, 29)`` float32: the values of
         :func:`observe_states` of the L recorded states (the teacher plans on noise-free rays,
         see there). ``which (B,)`` observes only those copies, ``(B', L, 29)`` in their order.
-        A stopped copy's repeated records are observed once and repeated."""
+        A stopped copy's repeated records are observed once and repeated. ``precision``: of
+        the ray casting (:func:`observe_arrays`)."""
         n_l = self.poses.shape[1]
         n_h = self.circles.shape[2]
         poses, circles, goal, live = self.poses, self.circles, self.final.goal, self.live_steps
@@ -271,10 +283,11 @@ class WorldTrace:
                 poses.reshape(n_b * n_l, 3),
                 circles.reshape(n_b * n_l, n_h, 3),
                 np.repeat(goal, n_l, axis=0),
+                precision,
             ).reshape(n_b, n_l, -1)
         distinct = np.arange(n_l)[None, :] < live[:, None]  # (B, L)
         obs = observe_arrays(
-            world, poses[distinct], circles[distinct], np.repeat(goal, live, axis=0)
+            world, poses[distinct], circles[distinct], np.repeat(goal, live, axis=0), precision
         )
         # Record (b, k) is distinct record min(k, live_b − 1) of copy b; copy b's distinct
         # records start at Σ_{b' < b} live_b' in ``obs``.
@@ -401,9 +414,11 @@ def observe(
     return observation_from_ranges(scan(world, state, rng), goal_bearing(state), world.sim.lidar)
 
 
-def observe_states(world: World, states: Sequence[State]) -> NDArray[np.float32]:
+def observe_states(
+    world: World, states: Sequence[State], precision: RayPrecision = RAY_PRECISION
+) -> NDArray[np.float32]:
     """``observe`` of several states at once without sensor noise, shape
-    ``(len(states), B, 29)``.
+    ``(len(states), B, 29)``; ``precision``: of the ray casting (:func:`observe_arrays`).
 
     The same values as observing each state alone with a noise-free LiDAR, with one
     ray-casting call for all of them. The world's ``lidar.noise_std`` is not applied: a planner
@@ -422,14 +437,27 @@ def observe_states(world: World, states: Sequence[State]) -> NDArray[np.float32]
     robot = np.concatenate([s.robot for s in states])
     circles = np.concatenate([_circles(s) for s in states])
     goal = np.concatenate([s.goal for s in states])
-    return observe_arrays(world, robot, circles, goal).reshape(len(states), n_b, -1)
+    return observe_arrays(world, robot, circles, goal, precision).reshape(len(states), n_b, -1)
 
 
-def observe_arrays(world: World, poses: F64, circles: F64, goal: F64) -> NDArray[np.float32]:
+def observe_arrays(
+    world: World, poses: F64, circles: F64, goal: F64, precision: RayPrecision = RAY_PRECISION
+) -> NDArray[np.float32]:
     """The noise-free observation of robots at ``poses (P, 3)`` among ``circles (P, N, 3)``
-    (x, y, r; r = 0 for a removed human) heading for ``goal (P, 2)``, shape ``(P, 29)``."""
+    (x, y, r; r = 0 for a removed human) heading for ``goal (P, 2)``, shape ``(P, 29)``.
+
+    ``precision`` is that of the ray casting (:func:`~pioneer.sim.lidar.cast_rays_into`):
+    "float64", the reference, or "float32" for a planner that accepts its ranges (the last
+    bits differ; a beam that all but grazes an obstacle may hit in one and miss in the
+    other): the teacher's ``TeacherConfig.precision``."""
     lid = world.sim.lidar
-    ranges = cast_rays(poses, circles, world.walls, lid.n_beams, lid.max_range)
+    ranges = cast_rays_into(
+        poses,
+        circles,
+        world.walls,
+        lid.max_range,
+        np.empty((poses.shape[0], lid.n_beams), ray_dtype(precision)),
+    )
     d = goal - poses[:, :2]
     bearing = np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2]
     return observation_from_ranges(ranges, bearing, lid)
