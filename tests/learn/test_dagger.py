@@ -27,7 +27,7 @@ import torch
 import pioneer.learn.dagger as dagger
 import pioneer.reward.default as reward_default
 from pioneer.cli import main
-from pioneer.control.teacher import make_teacher
+from pioneer.control.teacher import SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
@@ -643,6 +643,17 @@ def test_the_flat_layout_of_older_runs_and_checkpoints_reads_as_the_nested_one()
     with pytest.raises(ConfigError) as err:
         DaggerConfig.from_dict({"action_mode": "median"})
     assert_house_message(str(err.value), "StudentConfig.action_mode")
+
+
+def test_a_run_from_before_the_margin_tiers_reads_as_one_tier():
+    """Runs stored before ``SoftMargins.tiers`` were labelled by a one-tier teacher: their
+    settings read so, and a rerun with today's default into their folder is refused."""
+    old = TINY_CFG.to_dict()
+    del old["margins"]["tiers"]
+    cfg = DaggerConfig.from_dict(old)
+    assert cfg.margins.tiers == 1 != SoftMargins().tiers
+    assert cfg == TINY_CFG.replace(margins=SoftMargins(tiers=1))
+    assert DaggerConfig.from_dict(TINY_CFG.to_dict()) == TINY_CFG  # today's layout unchanged
 
 
 def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):

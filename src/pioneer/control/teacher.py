@@ -58,8 +58,10 @@ Fallback = Literal["stop", "evade"]  # what the teacher does when no candidate i
 @dataclasses.dataclass(frozen=True)
 class SoftMargins(Config):
     """Gaps the teacher prefers to keep: among the feasible (collision-free) candidates, it
-    chooses from those predicted to keep both gaps when any does, else from all feasible ones.
-    Unlike ``TeacherConfig.safety_margin`` they never leave the teacher without a command."""
+    chooses from those predicted to keep both gaps when any does, else from those keeping the
+    largest fraction of them that some candidate keeps (:meth:`factors`), else from all
+    feasible ones. Unlike ``TeacherConfig.safety_margin`` they never leave the teacher without
+    a command."""
 
     # Beyond the paper (docs/teacher.md, "Soft margins"): chosen on validation episodes so
     # that the DAgger students, who imitate the teacher to within centimetres, have room.
@@ -285,7 +287,8 @@ def make_teacher(
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
-    ``wall_margin`` are its soft margins [m] (:class:`SoftMargins`)."""
+    ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
+    (:class:`SoftMargins`)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.

@@ -125,7 +125,7 @@ class DaggerConfig(Config):
         """Build from a plain dict, also in the layout of runs and checkpoints written before
         the student's settings were nested (``student`` its kind, ``action_mode`` and
         ``nll_beta`` beside it)."""
-        return super().from_dict(_nest_student(data))
+        return super().from_dict(_one_tier_before_tiers(_nest_student(data)))
 
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
@@ -173,6 +173,16 @@ def _nest_student(data: Any) -> Any:
     student = {new: data[old] for old, new in flat.items() if old in data}
     rest = {k: v for k, v in data.items() if k not in flat}
     return {**rest, "student": student} if student else rest
+
+
+def _one_tier_before_tiers(data: Any) -> Any:
+    """``data`` with ``margins.tiers = 1`` where its margins have no ``tiers``: runs stored
+    before the tiers were labelled by a teacher with one tier, and resume as such (or are
+    refused for another setting), not with today's default."""
+    margins = data.get("margins") if isinstance(data, dict) else None
+    if not isinstance(margins, dict) or "tiers" in margins:
+        return data
+    return {**data, "margins": {**margins, "tiers": 1}}
 
 
 def scenario_set(pattern: str) -> list[str]:
