@@ -114,11 +114,11 @@ class DaggerConfig(Config):
     batch: Count = TRAIN_BATCH  # frames per Adam step
     lr: Positive = TRAIN_LR  # Adam learning rate
     seed: NonNegativeInt = 0  # seeds the networks and the DAgger episodes
-    # beyond the paper: a frame whose gap to the nearest person (surface to surface, at
-    # decision time) is below near_gap counts near_repeat times in training — the rare frames
-    # where the teacher's correction decides between a pass and a collision
-    near_gap: NonNegative = 0.0  # [m]
-    near_repeat: Count = 1
+    # Beyond the paper: frames whose gap to the nearest person (surface to surface, at
+    # decision time) is below near_gap count near_repeat times in training — the rare frames
+    # where the teacher's correction decides between a pass and a collision.
+    near_gap: NonNegative = 0.0  # [m] frames nearer a person than this count more (0: none)
+    near_repeat: Count = 1  # how many times such a frame counts in training
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:

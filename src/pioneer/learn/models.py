@@ -93,11 +93,10 @@ class StudentConfig(Config):
     # mixture mean ("mean"); see the module docstring
     action_mode: ActionMode = "mode"
     nll_beta: UnitInterval = 0.0  # β of the β-NLL training loss (MDN only; 0 = plain NLL)
-    # beyond the paper (pioneer.deploy.runtime.StudentInputs): the inputs also hold the
-    # previous step's observation o_{t−1} (obs_dim more) and/or u_{t−1}, the command the robot
-    # sent at the previous step (2 more)
-    previous_observation: bool = False
-    previous_command: bool = False
+    # Beyond the paper (pioneer.deploy.runtime.StudentInputs): what the student reads
+    # besides o_t.
+    previous_observation: bool = False  # also the previous step's observation o_{t−1}
+    previous_command: bool = False  # also u_{t−1}, the command sent at the previous step
 
     @property
     def inputs(self) -> StudentInputs:
