@@ -122,10 +122,15 @@ def bench_teacher_decision(plan: Plan) -> Result:
         "observe_f32": Case(lambda _: trajectory.observations(world, precision="float32")),
     }
     secs = time_cases(cases, plan.batch_repeats, warmup=3)
-    ratio = float(np.median(secs["decision"]) / np.median(secs["gemm"]))
-    ratio_episode = float(np.median(secs["episode"] / len(visited)) / np.median(secs["gemm"]))
-    ratio32 = float(np.median(secs["decision_f32"]) / np.median(secs["gemm"]))
-    ratio32_episode = float(np.median(secs["episode_f32"] / len(visited)) / np.median(secs["gemm"]))
+    gemm = float(np.median(secs["gemm"]))
+
+    def per_gemm(case: str, n: int = 1) -> float:
+        """The median time of one of ``case``'s ``n`` decisions per round ÷ the GEMM's."""
+        return float(np.median(secs[case] / n)) / gemm
+
+    ratio, ratio32 = per_gemm("decision"), per_gemm("decision_f32")
+    ratio_episode = per_gemm("episode", len(visited))
+    ratio32_episode = per_gemm("episode_f32", len(visited))
     inducing = int(density.alpha_.shape[0])  # type: ignore[union-attr]
     flops = 2 * feats.shape[0] * inducing * feats.shape[1]
     return {

@@ -393,20 +393,28 @@ def test_observe_states_equals_observing_each_state():
         observe_states(world, [states[0], states[1].take(0)])
 
 
+def _trace_and_steps(name: str, seed: int, copies: int, n_steps: int):
+    """A seeded state of ``name`` repeated ``copies`` times, advanced by one ``advance`` call
+    of ``n_steps`` and by as many calls of ``step`` with the same random commands:
+    ``(scenario, world, s0, trace, states)``."""
+    scenario = get_scenario(name)
+    world = scenario.world()
+    rng = np.random.default_rng(seed)
+    s0 = sample_state(scenario, rng).repeat(copies)
+    u = rng.uniform(-1.0, 1.0, (copies, 2))
+    tr = advance(world, s0, u, dt=0.3, n_steps=n_steps)
+    s, states = s0, []
+    for _ in range(n_steps):
+        s = step(world, s, u, dt=0.3)
+        states.append(s)
+    return scenario, world, s0, tr, states
+
+
 def test_float32_observations_of_a_trace_are_those_of_its_states():
     """The rollout observations with float32 rays (the teacher's option) come from one path:
     a trace's equal ``observe_states`` of its states in float32, bit for bit, and stay
     within the last bits of the float64 reference (``observe`` keeps float64)."""
-    scenario = get_scenario("hr-rl")
-    world = scenario.world()
-    rng = np.random.default_rng(12)
-    s0 = sample_state(scenario, rng).repeat(8)
-    u = rng.uniform(-1.0, 1.0, (8, 2))
-    tr = advance(world, s0, u, dt=0.3, n_steps=5)
-    s, states = s0, []
-    for _ in range(5):
-        s = step(world, s, u, dt=0.3)
-        states.append(s)
+    _, world, _, tr, states = _trace_and_steps("hr-rl", 12, copies=8, n_steps=5)
     f32 = tr.observations(world, precision="float32")
     np.testing.assert_array_equal(
         f32, observe_states(world, states, precision="float32").transpose(1, 0, 2)
@@ -420,17 +428,8 @@ def test_float32_observations_of_a_trace_are_those_of_its_states():
 def test_advance_equals_repeated_steps_bit_for_bit(name):
     """``advance`` (one kernel call for L steps, recording each) gives exactly the states,
     poses, humans, clearances and observations of L calls of ``step``."""
-    scenario = get_scenario(name)
-    world = scenario.world()
-    rng = np.random.default_rng(11)
-    s0 = sample_state(scenario, rng).repeat(9)
-    u = rng.uniform(-1.0, 1.0, (9, 2))
-    tr = advance(world, s0, u, dt=0.3, n_steps=6)
-    s, states = s0, []
-    for _ in range(6):
-        s = step(world, s, u, dt=0.3)
-        states.append(s)
-    assert states_equal(tr.final, s)
+    scenario, world, s0, tr, states = _trace_and_steps(name, 11, copies=9, n_steps=6)
+    assert states_equal(tr.final, states[-1])
     assert states_equal(s0, sample_state(scenario, np.random.default_rng(11)).repeat(9))
     np.testing.assert_array_equal(tr.poses, np.stack([x.robot for x in states], axis=1))
     np.testing.assert_array_equal(tr.circles[..., :2], np.stack([x.h_pos for x in states], 1))
