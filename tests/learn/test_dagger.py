@@ -753,3 +753,94 @@ def test_unknown_scenario_fails_before_writing_anything(tmp_path):
         run_dagger(DaggerConfig(scenario="nope"), tmp_path / "x", workers=1, progress=False)
     assert_house_message(str(err.value), "nope")
     assert not (tmp_path / "x").exists()
+
+
+# ------------------------------------------------------------------------------ selection
+@pytest.fixture
+def driven(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, int]]:
+    """(round folder, env seed) of every selection episode driven from now on (in-process,
+    workers=1)."""
+    seen: list[tuple[str, int]] = []
+    real = dagger._drive_task
+
+    def spy(args: tuple[int, str, str, int]) -> tuple[int, str, float]:
+        seen.append((Path(args[2]).parent.name, args[3]))
+        return real(args)
+
+    monkeypatch.setattr(dagger, "_drive_task", spy)
+    return seen
+
+
+def _selection(out: Path) -> list[dict[str, str]]:
+    with open(out / "selection.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_the_best(
+    run_mdn, reward_file, tmp_path, driven
+):
+    """With ``select_episodes`` a finished run (its rounds reused, nothing collected again)
+    drives each round's student alone on the same validation episodes; the rows equal those
+    episodes run one by one, and the run's student is the best round's (ties: the later)."""
+    res, _ = run_mdn
+    out = tmp_path / "select"
+    shutil.copytree(res.out, out)
+    cfg = TINY_CFG.replace(select_episodes=3)
+    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert len(driven) == 3 * 3
+    seeds = [s for _, s in driven[:3]]
+    assert [s for _, s in driven] == seeds * 3  # the same episodes for every round
+    assert all(s >= 2**32 and s < 2**33 for s in seeds)  # validation seeds …
+    harness = {episode_seed(TINY, 0, k, "validation") for k in range(100)}
+    assert not harness & set(seeds)  # … of their own purpose
+    rows = _selection(out)
+    assert [int(r["round"]) for r in rows] == [0, 1, 2] and sel.chosen in (0, 1, 2)
+    for r in rows:  # brute force: the round's student on each episode, one by one
+        ckpt = out / "rounds" / f"round-{int(r['round']):02d}" / "student.safetensors"
+        events = [dagger._drive_task((k, TINY, str(ckpt), s))[1] for k, s in enumerate(seeds)]
+        assert float(r["success_rate"]) == events.count("success") / 3
+        assert float(r["timeout_rate"]) == events.count("timeout") / 3
+        assert r["student_sha256"] == dagger.file_sha256(ckpt)
+    best = max(range(3), key=lambda i: (float(rows[i]["success_rate"]), i))
+    assert sel.chosen == best and [int(r["chosen"]) for r in rows] == [
+        int(i == best) for i in range(3)
+    ]
+    chosen = out / "rounds" / f"round-{best:02d}" / "student.safetensors"
+    assert sel.student.read_bytes() == chosen.read_bytes()
+    assert json.loads((out / "config.json").read_text())["select_episodes"] == 3
+
+    # Resumed: rows kept while their student is the same file; a changed student is driven again.
+    driven.clear()
+    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert driven == []
+    shutil.copy(
+        out / "rounds/round-02/student.safetensors", out / "rounds/round-01/student.safetensors"
+    )
+    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert [d for d, _ in driven] == ["round-01"] * 3
+    # Back to the paper's choice: the last round's student.
+    last = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    assert last.chosen == 2 and last.selection == []
+    assert last.student.read_bytes() == (out / "rounds/round-02/student.safetensors").read_bytes()
+
+
+def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
+    run_mdn, reward_file, tmp_path, monkeypatch
+):
+    res, _ = run_mdn
+    out = tmp_path / "rule"
+    shutil.copytree(res.out, out)
+    outcome = {"round-00": ["success"] * 2, "round-01": ["success", "collision"],
+               "round-02": ["success", "timeout"]}  # fmt: skip
+
+    def fake(args: tuple[int, str, str, int]) -> tuple[int, str, float]:
+        return args[0], outcome[Path(args[2]).parent.name][args[0]], 0.5
+
+    monkeypatch.setattr(dagger, "_drive_task", fake)
+    cfg = TINY_CFG.replace(select_episodes=2)
+    assert run_dagger(cfg, out, workers=1, reward=reward_file, progress=False).chosen == 0
+    outcome["round-02"] = ["success"] * 2
+    (out / "selection.csv").unlink()
+    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert sel.chosen == 2 and sel.selection[2]["collision_rate"] == 0.0
+    assert [r["success_rate"] for r in sel.selection] == [1.0, 0.5, 1.0]

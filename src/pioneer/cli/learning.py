@@ -72,9 +72,16 @@ class Distill:
         self._check_student_flags()
         res = run_dagger(self.dagger, self.out, self.workers, reward=self.reward)
         last = res.curves[-1]
+        chosen = ""
+        if res.selection:
+            row = res.selection[res.chosen]
+            chosen = (
+                f"; round {res.chosen} chosen: SR {100 * row['success_rate']:.0f}% on "
+                f"{row['episodes']} validation episodes ({res.out / 'selection.csv'})"
+            )
         print(
             f"student: {res.student}  ({last['frames_total']} frames, last round SR "
-            f"{100 * last['success_rate']:.0f}%); curves: {res.out / 'curves.png'}"
+            f"{100 * last['success_rate']:.0f}%){chosen}; curves: {res.out / 'curves.png'}"
         )
         return 0
 

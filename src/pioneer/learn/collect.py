@@ -15,12 +15,21 @@ from pioneer.imitation.store import file_version, save_episode
 if TYPE_CHECKING:  # the teacher is imported in the worker, when it is first needed
     from pioneer.control.teacher import SoftMargins
 
-__all__ = ["CollectTask", "clear_cache", "collect_episode", "collect_task"]
+__all__ = [
+    "CollectTask",
+    "DriveTask",
+    "clear_cache",
+    "collect_episode",
+    "collect_task",
+    "drive_task",
+]
 
 _CACHE: dict[tuple[Any, ...], Any] = {}
 # One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
 # env seed, output path, label_prev, the teacher's soft margins.
 CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins"]
+# One episode a student drives alone: index, scenario, student checkpoint, env seed.
+DriveTask = tuple[int, str, str, int]
 
 
 def clear_cache() -> None:
@@ -136,3 +145,15 @@ def collect_task(args: CollectTask) -> str:
     scenario, reward, checkpoint, env_seed, path, label_prev, margins = args
     ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev, margins)
     return save_episode(path, ep)
+
+
+def drive_task(args: DriveTask) -> tuple[int, str, float]:
+    """Drive one episode with a round's student alone, no teacher (DAgger's choice among its
+    rounds' students on validation episodes): ``(index, event, time [s])``."""
+    index, scenario, checkpoint, env_seed = args
+    from pioneer.envs.env import NavEnv
+    from pioneer.envs.episode import Episode
+
+    episode = Episode(NavEnv(scenario), _student(checkpoint), env_seed)
+    info = episode.run()
+    return index, str(episode.event), float(info["time"])

@@ -20,10 +20,19 @@ every input, the reward file included, is checked before the folder is created o
     DIR/rounds/round-RR/ep-EEE.npz       one labelled episode (obs, action, gap, …)
     DIR/rounds/round-RR/student.safetensors   the student trained after round RR
     DIR/curves.csv, DIR/curves.png       loss and student success per round
-    DIR/student.safetensors              the final student (= last round's)
+    DIR/selection.csv                    with ``select_episodes`` > 0: every round's student
+                                         on the same validation episodes
+    DIR/student.safetensors              the final student: the last round's (the paper's
+                                         §V-B.2), or with ``select_episodes`` > 0 the round
+                                         whose student succeeds most often on validation
+                                         episodes (Ross et al., 2011, Algorithm 3.1: "return
+                                         the best policy on validation"; ties: the later)
 
 Episode seeds are training seeds (:func:`pioneer.seeds.dagger_seed` of scenario, seed, round,
-episode), disjoint by construction from evaluation, validation and demonstration seeds.
+episode), disjoint by construction from evaluation, validation and demonstration seeds. The
+selection's episodes are validation seeds of their own purpose (``"dagger-select"``), the same
+for every round and every DAgger seed, so no evaluation episode chooses a student and the
+harness's validation episodes (``--seed-set validation``) stay unseen by the choice.
 
 ``--scenario`` may be a pattern (``general-*``): each episode then runs in one of the matching
 scenarios, drawn by its seed, and the teacher plans with the reward of that scenario's base —
@@ -62,9 +71,18 @@ from pioneer.imitation.rounds import Collector, Step, run_rounds
 from pioneer.imitation.rounds import one_thread as _worker_init
 from pioneer.imitation.store import RunFolder
 from pioneer.interrupt import kept
-from pioneer.io import atomic_path, inside, output_dir_kind, run_lock, to_json, write_text_atomic
-from pioneer.learn.collect import CollectTask, clear_cache, collect_episode
+from pioneer.io import (
+    atomic_path,
+    file_sha256,
+    inside,
+    output_dir_kind,
+    run_lock,
+    to_json,
+    write_text_atomic,
+)
+from pioneer.learn.collect import CollectTask, DriveTask, clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
+from pioneer.learn.collect import drive_task as _drive_task
 from pioneer.learn.models import (
     MDN,
     TRAIN_BATCH,
@@ -79,13 +97,15 @@ from pioneer.learn.models import (
 )
 from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
-from pioneer.seeds import dagger_seed
+from pioneer.seeds import dagger_seed, validation_seed
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
 
 SCENARIO_FILE = "scenario.json"
 FINAL_FILE = "student.safetensors"
+SELECTION_FILE = "selection.csv"
+SELECT_PURPOSE = "dagger-select"  # the validation seeds of the choice among rounds
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
 
 
@@ -119,6 +139,9 @@ class DaggerConfig(Config):
     # where the teacher's correction decides between a pass and a collision.
     near_gap: NonNegative = 0.0  # [m] frames nearer a person than this count more (0: none)
     near_repeat: Count = 1  # how many times such a frame counts in training
+    # Beyond the paper: validation episodes every round's student drives, the best becoming
+    # the run's student (0: the last round's, as in the paper)
+    select_episodes: NonNegativeInt = 0
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
@@ -144,14 +167,18 @@ class DaggerResult:
     out: Path
     student: Path
     curves: list[dict[str, Any]]
+    chosen: int  # the round whose student is ``student``
+    selection: list[dict[str, Any]]  # every round's validation row (empty: no selection)
 
 
 # ------------------------------------------------------------------------------ run folder
 def _folder(out: Path) -> RunFolder:
     """The run's episodes, rounds' students and settings (an older run's settings file is
     read in today's layout, options added since at their defaults; a rerun may change the
-    number of rounds)."""
-    return RunFolder(out, FINAL_FILE, "DAgger", upgrade=_current_layout, free=("rounds",))
+    number of rounds and of selection episodes)."""
+    return RunFolder(
+        out, FINAL_FILE, "DAgger", upgrade=_current_layout, free=("rounds", "select_episodes")
+    )
 
 
 def _current_layout(stored: dict[str, Any]) -> dict[str, Any]:
@@ -465,7 +492,92 @@ def _run(
             _write_curves(out, curves)
             if on_round is not None:
                 on_round(curves[-1])
+    chosen, selection = _select(cfg, out, sorted(rewards), n_workers, progress)
     final = out / FINAL_FILE
     with atomic_path(final) as tmp:
-        tmp.write_bytes(folder.model_path(cfg.rounds).read_bytes())
-    return DaggerResult(out, final, curves)
+        tmp.write_bytes(folder.model_path(chosen).read_bytes())
+    return DaggerResult(out, final, curves, chosen, selection)
+
+
+# ------------------------------------------------------------------------------ selection
+def _drive_tasks(cfg: DaggerConfig, names: list[str], checkpoint: Path) -> list[DriveTask]:
+    """The selection's episodes for one round's student: validation seeds of their own
+    purpose, the scenario of each drawn from the run's set by its seed."""
+    seeds = [validation_seed(SELECT_PURPOSE, cfg.scenario, k) for k in range(cfg.select_episodes)]
+    return [(k, names[s % len(names)], str(checkpoint), s) for k, s in enumerate(seeds)]
+
+
+def _selection_row(rnd: int, digest: str, results: list[tuple[int, str, float]]) -> dict[str, Any]:
+    events = [event for _, event, _ in results]
+    n = len(events)
+    return {
+        "round": rnd,
+        "episodes": n,
+        "success_rate": events.count("success") / n,
+        "collision_rate": events.count("collision") / n,
+        "timeout_rate": events.count("timeout") / n,
+        "mean_time_s": float(np.mean([t for _, _, t in results])),
+        "student_sha256": digest,
+    }
+
+
+def _stored_selection(out: Path, cfg: DaggerConfig) -> dict[int, dict[str, Any]]:
+    """The rows of ``DIR/selection.csv`` a resumed run can keep: those of the same number of
+    episodes (their student is matched by its digest when used)."""
+    p = out / SELECTION_FILE
+    if not p.exists():
+        return {}
+    with open(p, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    kept: dict[int, dict[str, Any]] = {}
+    for r in rows:
+        if int(r["episodes"]) != cfg.select_episodes:
+            continue
+        kept[int(r["round"])] = {
+            k: (int(v) if k in ("round", "episodes") else v if k == "student_sha256" else float(v))
+            for k, v in r.items()
+            if k != "chosen"
+        }
+    return kept
+
+
+def _write_selection(out: Path, rows: list[dict[str, Any]]) -> None:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(out / SELECTION_FILE, buf.getvalue())
+
+
+def _select(
+    cfg: DaggerConfig, out: Path, names: list[str], n_workers: int, progress: bool
+) -> tuple[int, list[dict[str, Any]]]:
+    """The round whose student becomes the run's: the last one, or with ``select_episodes``
+    the one that succeeds most often on the same validation episodes (ties: the later round,
+    trained on more data). Rows are written round by round and kept by a resumed run while
+    their student is the same file (its SHA-256)."""
+    if cfg.select_episodes == 0:
+        return cfg.rounds, []
+    folder, stored = _folder(out), _stored_selection(out, cfg)
+    digests = [file_sha256(folder.model_path(r)) for r in range(cfg.rounds + 1)]
+    todo = [r for r, d in enumerate(digests) if stored.get(r, {}).get("student_sha256") != d]
+    rows = {r: stored[r] for r in range(cfg.rounds + 1) if r not in todo}
+    bar = progress_bar(
+        total=len(todo) * cfg.select_episodes,
+        desc="each round's student on validation",
+        unit="ep",
+        enabled=progress and bool(todo),
+    )
+    if todo:
+        with bar, Collector(_drive_task, _worker_init, n_workers).open() as drive:
+            for rnd in todo:
+                results: list[tuple[int, str, float]] = []
+                for res in drive(_drive_tasks(cfg, names, folder.model_path(rnd))):
+                    results.append(typing.cast(tuple[int, str, float], res))
+                    bar.update(1)
+                rows[rnd] = _selection_row(rnd, digests[rnd], sorted(results))
+                _write_selection(out, [rows[r] for r in sorted(rows)])
+    ordered = [rows[r] for r in range(cfg.rounds + 1)]
+    chosen = max(range(len(ordered)), key=lambda r: (ordered[r]["success_rate"], r))
+    _write_selection(out, [{**row, "chosen": int(row["round"] == chosen)} for row in ordered])
+    return chosen, ordered
