@@ -17,7 +17,12 @@ from pioneer.control.precision import (
     with_precision,
 )
 from pioneer.control.rollout import rollout
-from pioneer.control.teacher import TeacherConfig, TeacherDecision, make_teacher
+from pioneer.control.teacher import (
+    LookaheadTeacher,
+    TeacherConfig,
+    TeacherDecision,
+    make_teacher,
+)
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
 from pioneer.errors import ConfigError
@@ -36,6 +41,19 @@ def recorded() -> dict[str, list[DecisionInput]]:
 def test_the_reference_is_the_default():
     assert TeacherConfig().precision == "float64"
     assert make_teacher("hr-rl").config.precision == "float64"
+
+
+def test_the_precision_is_a_teacher_parameter_that_runs_record():
+    """A policy spec sets it, and the made_by of an evaluation row names it (so a folder of
+    one precision refuses to resume with the other)."""
+    from pioneer.control.registry import build_policy
+    from pioneer.eval.harness import PolicySpec, made_by
+
+    spec = PolicySpec.parse("teacher:precision=float32")
+    teacher = build_policy(spec.name, "hr-rl", **dict(spec.kwargs))
+    assert isinstance(teacher, LookaheadTeacher) and teacher.config.precision == "float32"
+    assert made_by(spec, "hr-rl")["params"]["precision"] == "float32"
+    assert made_by(PolicySpec.parse("teacher"), "hr-rl")["params"]["precision"] == "float64"
 
 
 def test_an_unknown_precision_is_refused_with_the_fix():

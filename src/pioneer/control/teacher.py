@@ -283,12 +283,14 @@ def make_teacher(
     human_margin: float = SoftMargins.human,
     wall_margin: float = SoftMargins.wall,
     margin_tiers: int = SoftMargins.tiers,
+    precision: RayPrecision = TeacherConfig.precision,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
-    (:class:`SoftMargins`)."""
+    (:class:`SoftMargins`); ``precision`` the rollouts' ray casting (float64, the reference, or
+    float32: :mod:`pioneer.control.precision`)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -300,6 +302,7 @@ def make_teacher(
     features = str(model.info_.get("features", default_features(scenario))) if model else "xy"
     cfg = TeacherConfig(
         human_model=human_model,
+        precision=precision,
         fallback=fallback,
         margins=SoftMargins(human=human_margin, wall=wall_margin, tiers=margin_tiers),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
