@@ -5,6 +5,7 @@ decision time and PPO training throughput (``crowdnav_decision``,
 
 from __future__ import annotations
 
+import csv
 import math
 import subprocess
 import sys
@@ -125,15 +126,23 @@ def _torch_cpu_capability(checkpoint: Path) -> str:
         return str((f.metadata() or {}).get("torch_cpu_capability", "unknown"))
 
 
+def _chosen_round(out: Path) -> int:
+    """The round whose student the run kept (its ``selection.csv``)."""
+    with open(out / "selection.csv", newline="") as fh:
+        return next(int(r["round"]) for r in csv.DictReader(fh) if r["chosen"] == "1")
+
+
 def bench_dagger_run(plan: Plan) -> Result:
     """Wall time of a full DAgger run (50 + 10 × 50 episodes, HR-RL, MDN, 2 workers) through
-    the CLI, with the shipped student's recipe (the teacher's soft margins, its default, and
-    ``--previous-observation``: data/students/README.md). Opt-in (``--only dagger_run``): it
-    takes minutes."""
+    the CLI, with the shipped student's recipe (the teacher's soft margins, its default,
+    ``--previous-observation`` and the choice among the rounds on validation episodes:
+    data/students/README.md). Opt-in (``--only dagger_run``): it takes minutes."""
+    from pioneer.data import STUDENT_SELECT_EPISODES
+
     with tempfile.TemporaryDirectory(prefix="pioneer-bench-dagger-") as tmp:
         out = Path(tmp) / "dagger"
         cmd = [sys.executable, "-m", "pioneer.cli", "distill", "--scenario", SCENARIO]
-        cmd += ["--previous-observation"]
+        cmd += ["--previous-observation", "--select-episodes", str(STUDENT_SELECT_EPISODES)]
         t0 = time.perf_counter()
         proc = subprocess.run(
             [*cmd, "--out", str(out), "--workers", "2"],
@@ -156,6 +165,7 @@ def bench_dagger_run(plan: Plan) -> Result:
             "episodes": 550,
             "workers": 2,
             "last_round": curves[-1],
+            "chosen_round": _chosen_round(out),
             # when the shipped student was made by this very command, a fresh run matches it bit
             # for bit on a CPU where torch picks the same kernels (compare the capabilities)
             "same_weights_as_shipped": same,

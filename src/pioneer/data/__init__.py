@@ -14,6 +14,7 @@ __all__ = [
     "DEFAULT_STUDENT_KIND",
     "EPISODE_TIMES",
     "STUDENT_SEEDS",
+    "STUDENT_SELECT_EPISODES",
     "base_scenario",
     "shipped_crowdnav_weights",
     "shipped_demos",
@@ -31,6 +32,8 @@ EPISODE_TIMES = Path(__file__).parent / "episode_times.json"
 # The shipped student a policy loads when not told which kind: the paper's MDN (§V-B.2).
 DEFAULT_STUDENT_KIND = "mdn"
 STUDENT_SEEDS = (0, 1, 2)  # the DAgger seeds of the shipped students (Table III)
+# validation episodes that chose each shipped student among its run's rounds (--select-episodes)
+STUDENT_SELECT_EPISODES = 100
 
 
 def base_scenario(scenario: str) -> str:
