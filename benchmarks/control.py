@@ -135,14 +135,18 @@ def bench_teacher_decision(plan: Plan) -> Result:
     flops = 2 * feats.shape[0] * inducing * feats.shape[1]
     return {
         "metrics": {
-            "ms_decision": metric(secs["decision"] * 1e3, "ms", ("<=", 2.5)),
-            "ms_decision_episode_mean": metric(secs["episode"] * 1e3 / len(visited), "ms"),
+            # the targets: 4 ms in the scene, 2.5 ms along the episode on the 2-core reference
+            # machine, and the ratios to the GEMM that travel between hosts (8× and 5×)
+            "ms_decision": metric(secs["decision"] * 1e3, "ms", ("<=", 4.0)),
+            "ms_decision_episode_mean": metric(
+                secs["episode"] * 1e3 / len(visited), "ms", ("<=", 2.5)
+            ),
             "ms_rollout_120x10": metric(secs["rollout"] * 1e3, "ms"),
             "ms_rollout_steps": metric(secs["steps"] * 1e3, "ms"),
             "ms_rollout_observe": metric(secs["observe"] * 1e3, "ms"),
             "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
-            "ratio_decision_over_sgemm_256": metric([ratio], "x", ("<=", 12.0)),
-            "ratio_decision_episode_mean_over_sgemm_256": metric([ratio_episode], "x"),
+            "ratio_decision_over_sgemm_256": metric([ratio], "x", ("<=", 8.0)),
+            "ratio_decision_episode_mean_over_sgemm_256": metric([ratio_episode], "x", ("<=", 5.0)),
             "ms_sgemm_256": metric(secs["gemm"] * 1e3, "ms"),
             "ms_decision_float32": metric(secs["decision_f32"] * 1e3, "ms"),
             "ms_decision_episode_mean_float32": metric(
