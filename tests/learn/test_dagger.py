@@ -777,7 +777,7 @@ def _selection(out: Path) -> list[dict[str, str]]:
 
 
 def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_the_best(
-    run_mdn, reward_file, tmp_path, driven
+    run_mdn, reward_file, tmp_path, driven, capsys
 ):
     """With ``select_episodes`` a finished run (its rounds reused, nothing collected again)
     drives each round's student alone on the same validation episodes; the rows equal those
@@ -811,8 +811,10 @@ def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_
 
     # Resumed: rows kept while their student is the same file; a changed student is driven again.
     driven.clear()
-    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    assert main(_distill_argv(out, "--select-episodes", "3")) == 0
     assert driven == []
+    line = capsys.readouterr().out.strip()
+    assert f"round {best} chosen: SR " in line and "on 3 validation episodes" in line
     shutil.copy(
         out / "rounds/round-02/student.safetensors", out / "rounds/round-01/student.safetensors"
     )

@@ -1,6 +1,7 @@
 """DAgger's worker side: one labelled episode, driven by the teacher or the student, with the
-teacher labelling every step (:func:`collect_episode`); the teacher and the round's student
-are cached per worker process."""
+teacher labelling every step (:func:`collect_episode`), and one episode a round's student
+drives alone, for the choice among the rounds (:func:`drive_task`); the teacher and the
+round's student are cached per worker process."""
 
 from __future__ import annotations
 
