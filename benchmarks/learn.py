@@ -97,7 +97,8 @@ def _checkpoint_contents(path: Path) -> tuple[dict[str, Any], dict[str, Any], di
     """Config, info and tensors of a student checkpoint, read by the project's reader
     (:func:`pioneer.learn.load_student`, :func:`pioneer.learn.read_checkpoint_meta`). Configs
     come with their defaults filled in, so an option added later (default = the old behaviour)
-    does not make a checkpoint written before it look different."""
+    does not make a checkpoint written before it look different; the DAgger setting that only
+    chooses among a run's checkpoints (``select_episodes``) is left out, since it makes none."""
     from pioneer.learn import load_student, read_checkpoint_meta
     from pioneer.learn.dagger import DaggerConfig
 
@@ -105,6 +106,7 @@ def _checkpoint_contents(path: Path) -> tuple[dict[str, Any], dict[str, Any], di
     info = read_checkpoint_meta(path)["info"]
     if isinstance(info, dict) and "dagger" in info:
         info["dagger"] = DaggerConfig.from_dict(info["dagger"]).to_dict()
+        info["dagger"].pop("select_episodes")
     return model.config.to_dict(), info, dict(model.state_dict())
 
 
@@ -160,13 +162,14 @@ def bench_dagger_run(plan: Plan) -> Result:
         shipped = REPO / "src" / "pioneer" / "data" / "students" / f"{SCENARIO}-mdn.safetensors"
         same = same_checkpoint(fresh, shipped)
         capability = _torch_cpu_capability(fresh)
+        chosen = _chosen_round(out)
     return {
         "metrics": {"minutes_full_run": metric([wall / 60], "min", ("<=", 5.0))},
         "info": {
             "episodes": 550,
             "workers": 2,
             "last_round": curves[-1],
-            "chosen_round": _chosen_round(out),
+            "chosen_round": chosen,
             # when the shipped student was made by this very command, a fresh run matches it bit
             # for bit on a CPU where torch picks the same kernels (compare the capabilities)
             "same_weights_as_shipped": same,
