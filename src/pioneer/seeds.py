@@ -3,7 +3,8 @@
 - **evaluation** (``evaluation_seed``): the episodes every reported result is measured on
   (paper Tables I–IV), derived from (scenario, seed, trial); values in [0, 2³²).
 - **validation** (``validation_seed``): every choice and every tuning — the world's free
-  parameters (``pioneer calibrate``), thresholds, mode vs mixture mean; values in
+  parameters (``pioneer calibrate``), thresholds, mode vs mixture mean, the DAgger round a
+  run ships (purpose ``"dagger-select"``); values in
   [2³², 2³³), so never an evaluation episode.
 - **training**: demonstrations (``training_seed``: values in [2³³, 2³³ + 2³²)) and DAgger
   rollouts (``dagger_seed``: values in [2³³ + 2³², 2³⁴)).
