@@ -422,14 +422,19 @@ class _Students:
 
 
 # ------------------------------------------------------------------------------ driver
-def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
-    if not rows:
-        return
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` (dicts with the same keys, the first's order) as a CSV file, atomically."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]))
     w.writeheader()
     w.writerows(rows)
-    write_text_atomic(out / "curves.csv", buf.getvalue())
+    write_text_atomic(path, buf.getvalue())
+
+
+def _write_curves(out: Path, rows: list[dict[str, Any]]) -> None:
+    if not rows:
+        return
+    _write_csv(out / "curves.csv", rows)
     from pioneer.viz.student import plot_dagger_curves
 
     plot_dagger_curves(rows, out / "curves.png")
@@ -492,7 +497,7 @@ def _run(
             _write_curves(out, curves)
             if on_round is not None:
                 on_round(curves[-1])
-    chosen, selection = _select(cfg, out, sorted(rewards), n_workers, progress)
+    chosen, selection = _select(cfg, folder, sorted(rewards), n_workers, progress)
     final = out / FINAL_FILE
     with atomic_path(final) as tmp:
         tmp.write_bytes(folder.model_path(chosen).read_bytes())
@@ -533,24 +538,14 @@ def _stored_selection(out: Path, cfg: DaggerConfig) -> dict[int, dict[str, Any]]
     for r in rows:
         if int(r["episodes"]) != cfg.select_episodes:
             continue
-        kept[int(r["round"])] = {
-            k: (int(v) if k in ("round", "episodes") else v if k == "student_sha256" else float(v))
-            for k, v in r.items()
-            if k != "chosen"
-        }
+        row: dict[str, Any] = {k: float(v) for k, v in r.items() if k.endswith(("_rate", "_s"))}
+        row = {"round": int(r["round"]), "episodes": int(r["episodes"]), **row}
+        kept[row["round"]] = {**row, "student_sha256": r["student_sha256"]}
     return kept
 
 
-def _write_selection(out: Path, rows: list[dict[str, Any]]) -> None:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    w.writeheader()
-    w.writerows(rows)
-    write_text_atomic(out / SELECTION_FILE, buf.getvalue())
-
-
 def _select(
-    cfg: DaggerConfig, out: Path, names: list[str], n_workers: int, progress: bool
+    cfg: DaggerConfig, folder: RunFolder, names: list[str], n_workers: int, progress: bool
 ) -> tuple[int, list[dict[str, Any]]]:
     """The round whose student becomes the run's: the last one, or with ``select_episodes``
     the one that succeeds most often on the same validation episodes (ties: the later round,
@@ -558,7 +553,8 @@ def _select(
     their student is the same file (its SHA-256)."""
     if cfg.select_episodes == 0:
         return cfg.rounds, []
-    folder, stored = _folder(out), _stored_selection(out, cfg)
+    out = folder.root
+    stored = _stored_selection(out, cfg)
     digests = [file_sha256(folder.model_path(r)) for r in range(cfg.rounds + 1)]
     todo = [r for r, d in enumerate(digests) if stored.get(r, {}).get("student_sha256") != d]
     rows = {r: stored[r] for r in range(cfg.rounds + 1) if r not in todo}
@@ -576,8 +572,10 @@ def _select(
                     results.append(typing.cast(tuple[int, str, float], res))
                     bar.update(1)
                 rows[rnd] = _selection_row(rnd, digests[rnd], sorted(results))
-                _write_selection(out, [rows[r] for r in sorted(rows)])
+                _write_csv(out / SELECTION_FILE, [rows[r] for r in sorted(rows)])
     ordered = [rows[r] for r in range(cfg.rounds + 1)]
     chosen = max(range(len(ordered)), key=lambda r: (ordered[r]["success_rate"], r))
-    _write_selection(out, [{**row, "chosen": int(row["round"] == chosen)} for row in ordered])
+    _write_csv(
+        out / SELECTION_FILE, [{**row, "chosen": int(row["round"] == chosen)} for row in ordered]
+    )
     return chosen, ordered
