@@ -53,6 +53,7 @@ class Plan:
     equivalence_seeds: int = 8  # teacher episodes per scenario in teacher_equivalence (work)
     vec_steps: int = 100  # vector steps per timed run (x num_envs env steps)
     vec_repeats: int = 11
+    scaling_repeats: int = 3  # rounds of the harness_scaling runs (each ≈ 1 min)
 
 
 FULL = Plan()
@@ -67,6 +68,7 @@ QUICK = Plan(
     fit_large_repeats=1,
     cvar_episodes=1,
     vec_repeats=3,
+    scaling_repeats=1,
 )
 
 

@@ -34,6 +34,8 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
 - ``dagger_run``          a full DAgger run (550 episodes), opt-in via --only   <= 5 min
+- ``harness_scaling``     ``pioneer eval`` with 1 / 2 workers and a 2-node Ray cluster:
+                          speed-ups and the Amdahl serial fraction, opt-in via --only
 - ``cvar_bf_decision``    CVaR-BF over 4 seeded HR-RL episodes                <= 4 ms, p90 <= 8 ms
                           and its ratio to the host probe's GEMM (256³ float32) <= 19
 - ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights, 1 thread      <= 1 ms
@@ -60,7 +62,7 @@ if sys.path and Path(sys.path[0] or ".").resolve() == Path(__file__).resolve().p
     sys.path.pop(0)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks import control, learn, memory, psf, sim, vector
+from benchmarks import control, harness, learn, memory, psf, sim, vector
 from benchmarks.common import (
     DEFAULT_OUTPUT,
     FULL,
@@ -99,11 +101,12 @@ BENCHMARKS: dict[str, Callable[[Plan], Result]] = {
     "deploy_memory": memory.bench_deploy_memory,
     "memory": memory.bench_memory,
     "dagger_run": learn.bench_dagger_run,
+    "harness_scaling": harness.bench_harness_scaling,
     "crowdnav_decision": learn.bench_crowdnav_decision,
     "crowdnav_train_throughput": learn.bench_crowdnav_train_throughput,
     "vector_env": vector.bench_vector_env,
 }
-OPT_IN = ("dagger_run",)  # run only when named with --only (minutes long)
+OPT_IN = ("dagger_run", "harness_scaling")  # run only when named with --only (minutes long)
 FRESH_CACHE_ENV = "PIONEER_BENCH_FRESH_NUMBA_CACHE"
 
 

@@ -530,6 +530,7 @@ def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
         ({"student": StudentConfig(kind="mlp")}, "student.kind"),
         ({"seed": 1}, "seed"),
         ({"student": StudentConfig(action_mode="mean")}, "student.action_mode"),
+        ({"mirror": True}, "mirror"),
     ],
 )
 def test_rerun_with_other_settings_is_refused(run_mdn, reward_file, changes, needle):
@@ -552,6 +553,48 @@ def test_cli_rerun_with_other_settings_is_one_line_and_exit_2(run_mdn, reward_fi
     assert extra[0].removeprefix("--") in lines[0]
     assert captured.out == ""
     assert (res.out / "config.json").read_bytes() == config_before
+
+
+def test_mirror_trains_every_frame_also_as_its_mirror_image():
+    """``mirror``: the aggregate holds every frame and, after all of them, its mirror image —
+    checked frame by frame against the observation's mirror (sector k ↔ (K − k) mod K, angles
+    negated) and ω negated, for a student reading o_t, o_{t−1} and u_{t−1}."""
+    from pioneer.laser import mirror_observation
+
+    rng = np.random.default_rng(5)
+    student = StudentConfig(previous_observation=True, previous_command=True)
+    episodes = [
+        {
+            "obs": rng.uniform(-3.0, 5.0, (n, 29)).astype(np.float32),
+            "applied": rng.uniform(-0.5, 0.5, (n, 2)),
+            "action": rng.uniform(-0.5, 0.5, (n, 2)).astype(np.float32),
+            "gap": rng.uniform(0.0, 2.0, n),
+        }
+        for n in (7, 3)
+    ]
+    plain = dagger._Students(TINY_CFG.replace(student=student), {})
+    mirrored = dagger._Students(TINY_CFG.replace(student=student, mirror=True), {})
+    x, y, repeat = plain.aggregate(episodes)
+    xm, ym, repeat_m = mirrored.aggregate(episodes)
+    n = x.shape[0]
+    assert xm.shape == (2 * n, x.shape[1]) and ym.shape == (2 * n, 2)
+    np.testing.assert_array_equal(xm[:n], x)
+    np.testing.assert_array_equal(ym[:n], y)
+    np.testing.assert_array_equal(repeat_m, np.concatenate([repeat, repeat]))
+    row = n
+    for e in episodes:  # brute force, frame by frame
+        for t in range(len(e["obs"])):
+            before = e["obs"][max(t - 1, 0)]
+            np.testing.assert_array_equal(xm[row, :29], mirror_observation(e["obs"][t]))
+            np.testing.assert_array_equal(xm[row, 29:58], mirror_observation(before))
+            # u_{t−1} (v, ω) as the robot ran it: ω negated
+            np.testing.assert_array_equal(xm[row, 58:], x[row - n, 58:] * np.float32([1, -1]))
+            np.testing.assert_array_equal(ym[row], e["action"][t] * np.float32([1.0, -1.0]))
+            row += 1
+    # mirroring twice is the identity on the data
+    assert np.array_equal(
+        dagger._mirrored(dagger._mirrored(episodes[0]))["obs"], episodes[0]["obs"]
+    )
 
 
 # ------------------------------------------------------------------------------ MLP student

@@ -80,6 +80,7 @@ from pioneer.io import (
     to_json,
     write_text_atomic,
 )
+from pioneer.laser import mirror_observation
 from pioneer.learn.collect import CollectTask, DriveTask, clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import drive_task as _drive_task
@@ -142,6 +143,10 @@ class DaggerConfig(Config):
     # Beyond the paper: validation episodes every round's student drives, the best becoming
     # the run's student (0: the last round's, as in the paper)
     select_episodes: NonNegativeInt = 0
+    # Beyond the paper: every frame also trains as its mirror image (the world mirrored x → −x:
+    # the observations by pioneer.laser.mirror_observation, ω of the label and of u_{t−1}
+    # negated), for a student that drives on both sides of the door
+    mirror: bool = False
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
@@ -351,6 +356,18 @@ def _curve_row(step: Step[Data, Student], history: list[float]) -> dict[str, Any
     }
 
 
+def _mirrored(episode: Mapping[str, Any]) -> dict[str, Any]:
+    """The episode of the mirror-image world (x → −x): observations mirrored
+    (:func:`pioneer.laser.mirror_observation`), the commands' ω negated, the gaps the same."""
+    flip = np.array([1.0, -1.0])
+    return {
+        **episode,
+        "obs": mirror_observation(np.asarray(episode["obs"])),
+        "applied": np.asarray(episode["applied"], dtype=np.float64) * flip,
+        "action": np.asarray(episode["action"], dtype=np.float64) * flip,
+    }
+
+
 @dataclasses.dataclass(frozen=True)
 class _Students:
     """DAgger's parts for the students (:class:`pioneer.imitation.rounds.Method`): episodes
@@ -371,6 +388,8 @@ class _Students:
         """Inputs (the observation, and o_{t−1} or u_{t−1} for a student that reads them:
         :meth:`~pioneer.deploy.runtime.StudentInputs.of_episode`) and labels of every frame."""
         cfg = self.cfg
+        if cfg.mirror:
+            episodes = [*episodes, *map(_mirrored, episodes)]
         x = [cfg.student.inputs.of_episode(e["obs"], e["applied"]) for e in episodes]
         gap = np.concatenate([np.asarray(e["gap"], dtype=np.float64) for e in episodes])
         repeat = np.where(gap < cfg.near_gap, cfg.near_repeat, 1).astype(np.int64)
