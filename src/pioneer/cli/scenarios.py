@@ -7,12 +7,15 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
+import tyro
+
 from pioneer.cli._common import (
     OutDir,
     OutFile,
     Output,
     Seed,
     Workers,
+    config_flags,
     default,
     metavar,
     optional,
@@ -27,6 +30,8 @@ if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
 
 __all__ = ["Calibrate", "SampleLayouts", "Scenarios"]
+
+config_flags(LayoutDistribution)  # its ranges are sample-layouts' flags (--human-radius LO HI …)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,6 +123,7 @@ class SampleLayouts:
     """seed of the draws"""
     prefix: str = default(sample_variants, "prefix")
     """variant names: PREFIX-0000, PREFIX-0001, …"""
+    dist: tyro.conf.OmitArgPrefixes[LayoutDistribution] = LayoutDistribution()
 
     def run(self) -> int:
         """Draw, write the file, print a summary line."""
@@ -125,7 +131,7 @@ class SampleLayouts:
         from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
 
         check_name("--prefix", self.prefix)  # the variants' names become file names
-        dist = LayoutDistribution()
+        dist = self.dist
         variants, rejected = sample_variants(dist, self.n, self.seed, self.prefix)
         doc = {
             "format": SCENARIO_FILE_FORMAT,

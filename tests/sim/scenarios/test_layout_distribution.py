@@ -114,6 +114,27 @@ def test_the_command_writes_a_scenario_file(tmp_path):
     assert not (tmp_path / "none.json").exists()
 
 
+def test_the_command_draws_from_the_ranges_it_is_given(tmp_path):
+    """The distribution's ranges are flags; the file records them, its layouts keep them, and
+    a reversed range is one line, exit 2, no file."""
+    out = tmp_path / "large.json"
+    res = run_cli(
+        "sample-layouts", "--n", "4", "--human-radius", "0.45", "0.65", "--sides", "left",
+        "--out", str(out),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["distribution"]["human_radius"] == [0.45, 0.65]
+    for entry in doc["scenarios"].values():
+        # a field equal to the paper world's is left out of the entry
+        radius = entry["elevator"].get("human_radius", ElevatorLayout().human_radius)
+        assert 0.45 <= radius <= 0.65
+        assert entry["elevator"]["human_side"] == "left" and entry["base"] == "hl-rr"
+    bad = run_cli("sample-layouts", "--human-radius", "0.7", "0.5", "--out", str(tmp_path / "b"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert "--human-radius" in bad.stderr and not (tmp_path / "b").exists()
+
+
 def test_the_held_out_layouts_lie_outside_the_training_distribution(clean_registry):
     from pathlib import Path
 
