@@ -20,7 +20,7 @@ from pioneer.cli import main
 from pioneer.data import STUDENTS_DIR
 from pioneer.errors import ConfigError
 from pioneer.eval.harness import EPISODES_FILE, PolicySpec, evaluate, read_records
-from pioneer.eval.manifest import MANIFEST_FILE, first_difference
+from pioneer.eval.manifest import MANIFEST_FILE, PARAMETERS_ADDED, first_difference
 from pioneer.io import LOCK_FILE, run_lock
 from pioneer_testutils import file_tree, one_error_line
 
@@ -153,6 +153,28 @@ def test_records_without_made_by_are_refused(tmp_path, capsys):
     capsys.readouterr()
     code = main(_eval(out, "goal", trials=2))
     one_error_line(capsys.readouterr().err, code, "written before run manifests", "--overwrite")
+
+
+def test_a_row_recorded_before_a_parameter_existed_resumes_at_its_old_value(tmp_path, capsys):
+    """A teacher row written before ``precision`` was a parameter (its ``made_by`` without it)
+    was made with float64 rays: it resumes with them, and is refused with float32."""
+    out = tmp_path / "ev"
+    assert main(_eval(out, "teacher:density=false")) == 0
+    path = out / EPISODES_FILE
+    (rec,) = read_records(path)
+    assert rec["made_by"]["params"]["precision"] == PARAMETERS_ADDED["precision"]
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
+    for made in (rec["made_by"], manifest["rows"]["teacher"]["static"]):
+        made["params"].pop("precision")  # as written before the parameter existed
+    path.write_text(json.dumps(rec) + "\n")
+    (out / MANIFEST_FILE).write_text(json.dumps(manifest))
+    before = file_tree(tmp_path)
+    capsys.readouterr()
+    code = main(_eval(out, "teacher:density=false,precision=float32", trials=2))
+    one_error_line(capsys.readouterr().err, code, "params.precision", "'float64'", "float32")
+    assert file_tree(tmp_path) == before
+    assert main(_eval(out, "teacher:density=false", trials=2)) == 0
+    assert [r["trial"] for r in read_records(path)] == [0, 1]
 
 
 def test_first_difference_names_the_first_changed_key_in_order():

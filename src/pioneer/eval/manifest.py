@@ -26,7 +26,15 @@ from typing import Any
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json, write_text_atomic
 
-__all__ = ["MANIFEST_FILE", "MANIFEST_FORMAT", "check_made_by", "read_manifest", "write_manifest"]
+__all__ = [
+    "MANIFEST_FILE",
+    "MANIFEST_FORMAT",
+    "PARAMETERS_ADDED",
+    "check_made_by",
+    "read_manifest",
+    "upgraded",
+    "write_manifest",
+]
 
 MANIFEST_FILE = "manifest.json"
 MANIFEST_FORMAT = "pioneer.run-manifest/1"
@@ -34,6 +42,13 @@ MANIFEST_FORMAT = "pioneer.run-manifest/1"
 MadeBy = dict[tuple[str, str], dict[str, Any]]  # (scenario, row) → {"policy", "params", "files"}
 
 _FIX = "evaluate into a new --out, or pass --overwrite to start over (deletes its records)"
+
+# Parameters a policy factory gained after run folders held records made without them, with
+# the value every such record was made with: a recorded ``made_by`` that lacks one reads as
+# having it, so an old folder resumes with the same setting and is refused with another.
+PARAMETERS_ADDED: dict[str, Any] = {
+    "precision": "float64",  # the teacher's ray precision (make_teacher, 2026-11-26)
+}
 
 
 def read_manifest(out: Path) -> dict[str, Any]:
@@ -88,12 +103,12 @@ def check_made_by(
         by_pair.setdefault((str(r["scenario"]), str(r["policy"])), []).append(r)
     rows = manifest.get("rows", {})
     for (scenario, row), mine in made_by.items():
-        recorded = rows.get(row, {}).get(scenario)
+        recorded = upgraded(rows.get(row, {}).get(scenario), mine)
         where = f"{out / MANIFEST_FILE}: row {row!r} on {scenario}"
         if recorded is not None and recorded != mine:
             _refuse(where, recorded, mine)
         for rec in by_pair.get((scenario, row), []):
-            theirs = rec.get("made_by")
+            theirs = upgraded(rec.get("made_by"), mine)
             if theirs is None:
                 raise ConfigError(
                     expect(
@@ -105,6 +120,16 @@ def check_made_by(
                 )
             if theirs != mine:
                 _refuse(f"{out}: a record of row {row!r} on {scenario}", theirs, mine)
+
+
+def upgraded(recorded: Any, mine: Mapping[str, Any]) -> Any:
+    """``recorded`` (a stored ``made_by``, or ``None``) with every parameter of
+    :data:`PARAMETERS_ADDED` that ``mine`` has and it lacks, at the value it was made with."""
+    if not isinstance(recorded, Mapping) or not isinstance(recorded.get("params"), Mapping):
+        return recorded
+    params, now = dict(recorded["params"]), mine.get("params", {})
+    missing = {k: v for k, v in PARAMETERS_ADDED.items() if k in now and k not in params}
+    return {**recorded, "params": {**params, **missing}} if missing else recorded
 
 
 def _refuse(where: str, recorded: Mapping[str, Any], mine: Mapping[str, Any]) -> None:
