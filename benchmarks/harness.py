@@ -10,7 +10,7 @@ those the serial fraction of a run as long as the paper profile (docs/performanc
 
 from __future__ import annotations
 
-import json
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import REPO, SCENARIO, Case, Plan, Result, metric, time_cases
-from pioneer.data import EPISODE_TIMES
+from pioneer.experiments.reproduce import episode_times
 
 TRIALS = 60  # teacher episodes per timed run (evaluation seed 0)
 # The paper profile's episodes on 2 workers: user CPU-seconds of its fourth run on the
 # reference machine (docs/performance.md, "Current figures": 2,914 CPU-s): the length of run
 # the serial fraction is projected to; its fixed work (start-up and report) is the
-# ``overhead_s`` of src/pioneer/data/episode_times.json.
+# ``overhead_s`` of the shipped episode times (pioneer.experiments.reproduce.episode_times).
 PAPER_EPISODE_CPU_S = 2900.0
 PROJECTED_WORKERS = (2, 4, 8, 16, 32)
 
@@ -60,7 +60,7 @@ def bench_harness_scaling(plan: Plan) -> Result:
     cluster = _ray_cluster()
     try:
         with tempfile.TemporaryDirectory(prefix="pioneer-bench-scaling-") as tmp:
-            runs = iter(range(10**6))
+            runs = itertools.count()
 
             def case(trials: int, extra: list[str]) -> Case:
                 return Case(lambda _: _eval(Path(tmp) / f"run-{next(runs)}", trials, extra))
@@ -81,7 +81,7 @@ def bench_harness_scaling(plan: Plan) -> Result:
     # the episodes alone: one worker's time for them over two workers' (1 = perfect): what two
     # episodes at once on the two cores cost each other, which Amdahl's serial part leaves out
     efficiency = (t1 - t0) / (2.0 * (t2 - t0))
-    fixed = json.loads(EPISODE_TIMES.read_text())["overhead_s"]
+    fixed = episode_times().overhead_s
     f_paper = fixed / (fixed + PAPER_EPISODE_CPU_S)
     e2 = float(np.median(efficiency))
 

@@ -131,11 +131,10 @@ class SampleLayouts:
         from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
 
         check_name("--prefix", self.prefix)  # the variants' names become file names
-        dist = self.dist
-        variants, rejected = sample_variants(dist, self.n, self.seed, self.prefix)
+        variants, rejected = sample_variants(self.dist, self.n, self.seed, self.prefix)
         doc = {
             "format": SCENARIO_FILE_FORMAT,
-            "distribution": {**dist.to_dict(), "seed": self.seed, "rejected_draws": rejected},
+            "distribution": {**self.dist.to_dict(), "seed": self.seed, "rejected_draws": rejected},
             "scenarios": variants,
         }
         write_text_atomic(self.out, to_json(doc, indent=1) + "\n")

@@ -32,7 +32,6 @@ __all__ = [
     "PARAMETERS_ADDED",
     "check_made_by",
     "read_manifest",
-    "upgraded",
     "write_manifest",
 ]
 
@@ -103,12 +102,12 @@ def check_made_by(
         by_pair.setdefault((str(r["scenario"]), str(r["policy"])), []).append(r)
     rows = manifest.get("rows", {})
     for (scenario, row), mine in made_by.items():
-        recorded = upgraded(rows.get(row, {}).get(scenario), mine)
+        recorded = _upgraded(rows.get(row, {}).get(scenario), mine)
         where = f"{out / MANIFEST_FILE}: row {row!r} on {scenario}"
         if recorded is not None and recorded != mine:
             _refuse(where, recorded, mine)
         for rec in by_pair.get((scenario, row), []):
-            theirs = upgraded(rec.get("made_by"), mine)
+            theirs = _upgraded(rec.get("made_by"), mine)
             if theirs is None:
                 raise ConfigError(
                     expect(
@@ -122,7 +121,7 @@ def check_made_by(
                 _refuse(f"{out}: a record of row {row!r} on {scenario}", theirs, mine)
 
 
-def upgraded(recorded: Any, mine: Mapping[str, Any]) -> Any:
+def _upgraded(recorded: Any, mine: Mapping[str, Any]) -> Any:
     """``recorded`` (a stored ``made_by``, or ``None``) with every parameter of
     :data:`PARAMETERS_ADDED` that ``mine`` has and it lacks, at the value it was made with."""
     if not isinstance(recorded, Mapping) or not isinstance(recorded.get("params"), Mapping):
