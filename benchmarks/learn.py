@@ -138,16 +138,21 @@ def _chosen_round(out: Path) -> int:
 def bench_dagger_run(plan: Plan) -> Result:
     """Wall time of a full DAgger run (50 + 10 × 50 episodes, HR-RL, MDN, 2 workers) through
     the CLI, with the shipped student's recipe (the teacher's soft margins, its default,
-    ``--previous-observation``, its label smoothing and the choice among the rounds on
-    validation episodes: data/students/README.md). Opt-in (``--only dagger_run``): it takes
-    minutes."""
-    from pioneer.data import STUDENT_LABEL_PREV, STUDENT_SELECT_EPISODES
+    ``--previous-observation``, ``--previous-command``, the teacher's previous label in the
+    labels and the choice among the rounds on validation episodes: data/students/README.md).
+    Opt-in (``--only dagger_run``): it takes minutes."""
+    from pioneer.data import (
+        STUDENT_LABEL_PREV,
+        STUDENT_PREVIOUS_COMMAND,
+        STUDENT_SELECT_EPISODES,
+    )
 
     with tempfile.TemporaryDirectory(prefix="pioneer-bench-dagger-") as tmp:
         out = Path(tmp) / "dagger"
         cmd = [sys.executable, "-m", "pioneer.cli", "distill", "--scenario", SCENARIO]
         cmd += ["--previous-observation", "--select-episodes", str(STUDENT_SELECT_EPISODES)]
-        cmd += ["--label-prev", STUDENT_LABEL_PREV[SCENARIO, "mdn"]]
+        cmd += ["--label-prev", STUDENT_LABEL_PREV]
+        cmd += ["--previous-command"] if STUDENT_PREVIOUS_COMMAND["mdn"] else []
         t0 = time.perf_counter()
         proc = subprocess.run(
             [*cmd, "--out", str(out), "--workers", "2"],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.metadata
+import itertools
 import subprocess
 import sys
 from typing import Any
@@ -166,6 +167,7 @@ def test_every_shipped_student_records_the_recipe_its_readme_names():
     ``pioneer.data`` (data/students/README.md): a file copied from the wrong run fails here."""
     from pioneer.data import (
         STUDENT_LABEL_PREV,
+        STUDENT_PREVIOUS_COMMAND,
         STUDENT_SEEDS,
         STUDENT_SELECT_EPISODES,
         shipped_student,
@@ -174,17 +176,18 @@ def test_every_shipped_student_records_the_recipe_its_readme_names():
     from pioneer.learn.dagger import DaggerConfig
 
     margins = DaggerConfig().margins  # the teacher's default soft margins
-    for (scenario, kind), label_prev in STUDENT_LABEL_PREV.items():
+    for scenario, kind in itertools.product(("hr-rl", "hl-rr"), STUDENT_PREVIOUS_COMMAND):
         for seed in STUDENT_SEEDS:
             dagger = read_checkpoint_meta(shipped_student(scenario, kind, seed=seed))["info"]
             dagger = dagger["dagger"]
             assert (dagger["scenario"], dagger["student"]["kind"]) == (scenario, kind)
             assert dagger["seed"] == seed
-            assert dagger["label_prev"] == label_prev
+            assert dagger["label_prev"] == STUDENT_LABEL_PREV
             # files chosen by rerunning a finished run with the selection were trained
             # before the setting existed and do not record it (data/students/README.md)
             assert dagger.get("select_episodes", STUDENT_SELECT_EPISODES) == STUDENT_SELECT_EPISODES
             assert dagger["student"]["previous_observation"] is True
+            assert dagger["student"]["previous_command"] is STUDENT_PREVIOUS_COMMAND[kind]
             assert dagger["margins"] == {
                 "human": margins.human,
                 "wall": margins.wall,

@@ -14,6 +14,7 @@ __all__ = [
     "DEFAULT_STUDENT_KIND",
     "EPISODE_TIMES",
     "STUDENT_LABEL_PREV",
+    "STUDENT_PREVIOUS_COMMAND",
     "STUDENT_SEEDS",
     "STUDENT_SELECT_EPISODES",
     "base_scenario",
@@ -35,15 +36,12 @@ DEFAULT_STUDENT_KIND = "mdn"
 STUDENT_SEEDS = (0, 1, 2)  # the DAgger seeds of the shipped students (Table III)
 # validation episodes that chose each shipped student among its run's rounds (--select-episodes)
 STUDENT_SELECT_EPISODES = 100
-# the label's u_{t-1} (--label-prev) of each shipped student, per (scenario, kind), chosen on
-# validation episodes: the teacher's own previous label, but the HR-RL MDN's applied command
-# (docs/student.md, "Remedies")
-STUDENT_LABEL_PREV = {
-    ("hr-rl", "mdn"): "applied",
-    ("hr-rl", "mlp"): "teacher",
-    ("hl-rr", "mdn"): "teacher",
-    ("hl-rr", "mlp"): "teacher",
-}
+# the label's u_{t-1} (--label-prev) of every shipped student, chosen on validation episodes:
+# the teacher's own previous label (docs/student.md, "Remedies")
+STUDENT_LABEL_PREV = "teacher"
+# whether each shipped kind also reads its own last command u_{t-1} (--previous-command),
+# chosen on validation episodes for the MDN; the MLP was not measured with it
+STUDENT_PREVIOUS_COMMAND = {"mdn": True, "mlp": False}
 
 
 def base_scenario(scenario: str) -> str:
