@@ -83,6 +83,7 @@ from pioneer.imitation.rounds import Collector, Fitted, Step, one_thread, run_ro
 from pioneer.imitation.store import RunFolder, check_settings
 from pioneer.interrupt import kept
 from pioneer.io import to_json
+from pioneer.nn.recurrent import gru_sequence
 from pioneer.sim.scenarios import ScenarioConfig
 
 __all__ = [
@@ -155,12 +156,9 @@ def _padded(data: BCData) -> dict[str, torch.Tensor]:
 
 def _actor_means(model: CrowdNavNet, b: dict[str, torch.Tensor]) -> torch.Tensor:
     x, _, _ = model.encode(b["robot"], b["temporal"], b["spatial"], b["mask"])
-    h = model.initial_state(x.shape[1])
-    hs = []
-    for t in range(x.shape[0]):
-        h = model.gru(x[t], h)
-        hs.append(h)
-    return model.mean_head(model.actor(torch.stack(hs)))
+    keep = torch.ones(x.shape[:2])  # each column is one episode from its start
+    hs = gru_sequence(model.gru, x, model.initial_state(x.shape[1]), keep)
+    return model.mean_head(model.actor(hs))
 
 
 def train_bc(

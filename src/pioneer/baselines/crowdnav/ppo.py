@@ -37,8 +37,10 @@ first U updates train only the critic head (own Adam), the cloned actor frozen, 
 first policy updates see a fitted critic. Both are off by default (pure PPO, as above).
 
 Recurrent minibatches are whole 30-step sequences of a subset of the environments; the GRU
-is re-run from the rollout's first hidden state with resets at episode starts. Advantages are
-normalised over the rollout.
+is re-run from the rollout's first hidden state with resets at episode starts, the whole
+sequence in one numba kernel each way (:func:`pioneer.nn.recurrent.gru_sequence`, equal to
+the step-by-step ``GRUCell`` to float32 rounding); Adam is PyTorch's fused one. Advantages
+are normalised over the rollout.
 
 Outputs in ``out/`` (each written atomically)
     ``checkpoint.safetensors``  the whole training state every ``checkpoint_every`` updates:

@@ -26,6 +26,7 @@ from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.io import atomic_path
 from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
+from pioneer.nn.recurrent import gru_sequence
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, sample_state
@@ -126,6 +127,12 @@ def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def _normal(mean: torch.Tensor, std: torch.Tensor) -> torch.distributions.Normal:
+    """The policy's Gaussian without argument validation (its checks cost more than its
+    log-probabilities at this size; the values are the same)."""
+    return torch.distributions.Normal(mean, std, validate_args=False)
+
+
 # ------------------------------------------------------------------------------ the trainer
 class _Trainer:
     """Everything that changes during training (saved whole in the checkpoint)."""
@@ -142,11 +149,14 @@ class _Trainer:
         self.warm = warm or WarmStartConfig()
         self.world = scenario.world()
         self.model = CrowdNavNet(net, seed=ppo.seed)
-        self.opt = torch.optim.Adam(self.model.parameters(), lr=ppo.lr, eps=ppo.adam_eps)
+        # fused: one kernel for every parameter's update instead of a loop of small operators
+        self.opt = torch.optim.Adam(
+            self.model.parameters(), lr=ppo.lr, eps=ppo.adam_eps, fused=True
+        )
         # The critic warm-up trains the critic head alone, with its own optimiser.
         self.critic_params = [*self.model.critic.parameters(), *self.model.value_head.parameters()]
         self.critic_opt = torch.optim.Adam(
-            self.critic_params, lr=self.warm.critic_lr, eps=ppo.adam_eps
+            self.critic_params, lr=self.warm.critic_lr, eps=ppo.adam_eps, fused=True
         )
         self.rng = np.random.default_rng(np.random.SeedSequence([ppo.seed, 0x0C20D]))
         self.gen = torch.Generator().manual_seed(ppo.seed + 1)
@@ -193,7 +203,7 @@ class _Trainer:
                 h, mean, value = self._policy_step(obs)
                 noise = torch.randn(mean.shape, generator=self.gen)
                 action = mean + std * noise
-                logp = torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
+                logp = _normal(mean, std).log_prob(action).sum(-1)
                 for k, x in zip(("robot", "temporal", "spatial", "mask"), obs, strict=True):
                     buf[k].append(x)
                 buf["start"].append(self.start.copy())
@@ -255,24 +265,22 @@ class _Trainer:
                     batch["spatial"][:, idx],
                     batch["mask"][:, idx],
                 )
-                keep = (~batch["start"][:, idx]).to(torch.float32).unsqueeze(-1)
-                h = batch["h0"][idx]
-                hs = []
-                for t in range(x.shape[0]):
-                    h = model.gru(x[t], h * keep[t])
-                    hs.append(h)
+                keep = (~batch["start"][:, idx]).to(torch.float32)
+                hs = gru_sequence(model.gru, x, batch["h0"][idx], keep)
                 if warmup:
-                    value = model.value_head(model.critic(torch.stack(hs).detach())).squeeze(-1)
+                    value = model.value_head(model.critic(hs.detach())).squeeze(-1)
                     vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
                     self.critic_opt.zero_grad(set_to_none=True)
                     (ppo.value_coef * vl).backward()
-                    torch.nn.utils.clip_grad_norm_(self.critic_params, ppo.max_grad_norm)
+                    torch.nn.utils.clip_grad_norm_(
+                        self.critic_params, ppo.max_grad_norm, foreach=True
+                    )
                     self.critic_opt.step()
                     stats["value_loss"] += float(vl.detach())
                     stats["n"] += 1
                     continue
-                mean, value = model.heads(torch.stack(hs))
-                dist = torch.distributions.Normal(mean, torch.exp(model.log_std))
+                mean, value = model.heads(hs)
+                dist = _normal(mean, torch.exp(model.log_std))
                 logp = dist.log_prob(batch["action"][:, idx]).sum(-1)
                 ratio = torch.exp(logp - batch["logp"][:, idx])
                 a = adv[:, idx]
@@ -282,7 +290,7 @@ class _Trainer:
                 loss = pg + ppo.value_coef * vl - ppo.entropy_coef * ent
                 self.opt.zero_grad(set_to_none=True)
                 loss.backward()
-                torch.nn.utils.clip_grad_norm_(model.parameters(), ppo.max_grad_norm)
+                torch.nn.utils.clip_grad_norm_(model.parameters(), ppo.max_grad_norm, foreach=True)
                 self.opt.step()
                 stats["policy_loss"] += float(pg.detach())
                 stats["value_loss"] += float(vl.detach())
