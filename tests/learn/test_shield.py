@@ -133,13 +133,30 @@ def test_the_shield_intervenes_exactly_above_the_threshold(ckpt, signal):
     _drive(probe, 30)
     thr = float(np.median(_signal(probe)))
 
-    shield = make_shield_policy(ckpt, fallback="goal", threshold=thr, signal=signal)
+    shield = make_shield_policy(ckpt, fallback="goal", threshold=thr, signal=signal, hold=0)
     sent, student, goal, _ = _drive(shield, 30, reference=GoalPolicy())
     over = _signal(shield) > thr
     assert 0 < over.sum() < len(over)  # both cases occur
     assert shield.shielded == [float(o) for o in over]
     np.testing.assert_array_equal(sent[over], goal[over])
     np.testing.assert_array_equal(sent[~over], student[~over])
+
+
+@pytest.mark.parametrize("hold", [1, 3])
+def test_the_fallback_holds_for_hold_steps_after_each_unsure_one(ckpt, hold):
+    probe = make_shield_policy(ckpt, fallback="goal", threshold=HUGE)
+    _drive(probe, 40)
+    thr = float(np.quantile(_signal(probe), 0.8))
+    shield = make_shield_policy(ckpt, fallback="goal", threshold=thr, hold=hold)
+    sent, student, goal, _ = _drive(shield, 40, reference=GoalPolicy())
+    over = _signal(shield) > thr
+    # brute force: step t is the fallback's if any of the steps t − hold … t was unsure
+    want = [float(over[max(0, t - hold) : t + 1].any()) for t in range(len(over))]
+    assert 0 < sum(want) < len(want) and sum(want) > over.sum()  # the hold shows
+    assert shield.shielded == want
+    mine = np.asarray(want, dtype=bool)
+    np.testing.assert_array_equal(sent[mine], goal[mine])
+    np.testing.assert_array_equal(sent[~mine], student[~mine])
 
 
 def test_slow_mode_scales_the_speed_and_keeps_the_turn_rate(ckpt):
@@ -179,7 +196,12 @@ def test_the_teacher_takes_over_from_the_applied_command(ckpt, reward_file):
     """On a handover the teacher smooths from ``state.command`` (the command last applied,
     here the student's as the robot executed it), not from its own previous decision."""
     shield = make_shield_policy(
-        ckpt, scenario="static", fallback="teacher", reward=str(reward_file), threshold=0.0
+        ckpt,
+        scenario="static",
+        fallback="teacher",
+        reward=str(reward_file),
+        threshold=0.0,
+        hold=0,
     )
     assert isinstance(shield.fallback, LookaheadTeacher) and shield.fallback.density is not None
     schedule = [0.0 if t % 2 else HUGE for t in range(12)]  # hand over every other step
@@ -221,8 +243,9 @@ def test_default_threshold_is_read_from_the_checkpoint(ckpt):
     assert default_threshold(ckpt, "epistemic", 0.95) == 0.07
     assert default_threshold(ckpt, "aleatoric", 0.9) == 0.1
     assert default_threshold(ckpt, "total", 0.99) == pytest.approx(0.4 + 0.09)
-    # the default: total, q = 0.9 (aleatoric 0.1 + epistemic 0.03)
-    assert make_shield_policy(ckpt, fallback="goal").threshold == pytest.approx(0.13)
+    # the default: total, q = 0.95 (aleatoric 0.2 + epistemic 0.07), held 10 steps
+    default = make_shield_policy(ckpt, fallback="goal")
+    assert default.threshold == pytest.approx(0.27) and default.hold == 10
     shield = make_shield_policy(ckpt, fallback="goal", signal="total", quantile=0.5)
     assert shield.threshold == pytest.approx(0.06)
     assert make_shield_policy(ckpt, fallback="goal", threshold=0.5).threshold == 0.5
@@ -251,6 +274,7 @@ def test_a_missing_default_threshold_is_a_config_error(ckpt, tmp_path):
         ({"slow_factor": 1.5}, "slow_factor"),
         ({"slow_factor": -0.1}, "slow_factor"),
         ({"fallback": None}, "fallback"),
+        ({"hold": -1}, "hold"),
     ],
 )
 def test_bad_settings_are_refused(ckpt, changes, needle):
@@ -293,7 +317,7 @@ def test_registered_as_student_shield(ckpt, reward_file):
     pol = build_policy("student-shield", "static", checkpoint=pattern, fallback="goal")
     assert isinstance(pol, ShieldPolicy) and pol.name == "student-shield"
     assert isinstance(pol.fallback, GoalPolicy)
-    total = QUANTILES["aleatoric"]["0.9"] + QUANTILES["epistemic"]["0.9"]
+    total = QUANTILES["aleatoric"]["0.95"] + QUANTILES["epistemic"]["0.95"]
     assert pol.threshold == pytest.approx(total)  # read from the filled-in path
     assert (pol.signal, pol.mode) == ("total", "handover")
 

@@ -47,6 +47,7 @@ _FIX = "evaluate into a new --out, or pass --overwrite to start over (deletes it
 # having it, so an old folder resumes with the same setting and is refused with another.
 PARAMETERS_ADDED: dict[str, Any] = {
     "precision": "float64",  # the teacher's ray precision (make_teacher, 2026-11-26)
+    "hold": 0,  # the shield's fallback steps after an unsure one (make_shield_policy, 2026-11-27)
 }
 
 

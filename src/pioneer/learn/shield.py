@@ -8,10 +8,14 @@ uncertainty. When the chosen signal exceeds the threshold the shield intervenes:
   (``fallback="goal" | "dwa" | "sfm"``, what a robot without privileged state would use);
 - ``mode="slow"``: the student's command with the speed scaled by ``slow_factor``.
 
-Threshold: a number, or by default the ``quantile`` (0.9) of the signal over the student's
+``hold``: after an intervention the fallback keeps deciding for this many more steps, even
+where the signal has fallen (0: only the unsure steps themselves).
+
+Threshold: a number, or by default the ``quantile`` (0.95) of the signal over the student's
 own DAgger training frames, stored in the checkpoint (``uncertainty_quantiles``) — the shield
-then intervenes on the ≈10 % least familiar situations. Default signal: the total predictive
-variance (aleatoric + epistemic). Both chosen on validation episodes: the most success for a
+then intervenes on the ≈ 5 % least familiar situations, and the fallback keeps deciding for
+``hold`` = 10 steps (1 s) after each. Default signal: the total predictive variance
+(aleatoric + epistemic). All three chosen on validation episodes: the most success for a
 handover of at most ≈ 10 % of the steps (docs/student.md, "Uncertainty shield"). Registered
 as ``student-shield``.
 """
@@ -38,7 +42,8 @@ __all__ = ["ShieldPolicy", "make_shield_policy"]
 
 SIGNALS = ("epistemic", "aleatoric", "total")
 SIGNAL = "total"  # the default signal (module docstring)
-QUANTILE = 0.9  # the default threshold's quantile of the signal over the training frames
+QUANTILE = 0.95  # the default threshold's quantile of the signal over the training frames
+HOLD = 10  # [steps] the fallback's extra steps after an unsure one (module docstring)
 MODES = ("handover", "slow")
 
 
@@ -54,6 +59,7 @@ class ShieldPolicy:
         mode: str = "handover",
         slow_factor: float = 0.3,
         name: str = "student-shield",
+        hold: int = HOLD,
     ) -> None:
         if signal not in SIGNALS:
             fix = f"use {default(ShieldPolicy, 'signal')}"
@@ -70,6 +76,8 @@ class ShieldPolicy:
         if not 0.0 <= slow_factor <= 1.0:
             fix = f"use {default(ShieldPolicy, 'slow_factor')}"
             raise ConfigError(expect("slow_factor", "in [0, 1]", slow_factor, fix))
+        if not (isinstance(hold, int) and hold >= 0):
+            raise ConfigError(expect("shield hold", "an integer >= 0 [steps]", hold, "use 0"))
         self.student = student
         self.fallback = fallback
         self.threshold = float(threshold)
@@ -77,7 +85,9 @@ class ShieldPolicy:
         self.mode = mode
         self.slow_factor = float(slow_factor)
         self.name = name
+        self.hold = hold
         self.shielded: list[float] = []
+        self._held = 0  # steps the fallback still decides after the last unsure one
 
     @property
     def uncertainty(self) -> list[tuple[float, float]]:
@@ -90,6 +100,7 @@ class ShieldPolicy:
         if self.fallback is not None:
             self.fallback.reset(info, rng)
         self.shielded = []
+        self._held = 0
 
     def _value(self) -> float:
         ale, epi = self.student.uncertainty[-1]
@@ -98,7 +109,9 @@ class ShieldPolicy:
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The student's command, or the fallback's / a slowed one when it is unsure."""
         u = self.student.act(obs, info)
-        intervene = self._value() > self.threshold
+        unsure = self._value() > self.threshold
+        intervene = unsure or self._held > 0
+        self._held = self.hold if unsure else max(self._held - 1, 0)
         self.shielded.append(float(intervene))
         if not intervene:
             return u
@@ -147,6 +160,7 @@ def make_shield_policy(
     slow_factor: Annotated[float, Interval(ge=0, le=1)] = 0.3,
     reward: str | None = None,
     name: str = "student-shield",
+    hold: Annotated[int, Interval(ge=0)] = HOLD,
 ) -> ShieldPolicy:
     """Policy factory: an MDN student (default: the shipped one of ``scenario``) shielded by
     ``fallback`` (a registered policy name; the teacher gets ``reward`` if given)."""
@@ -161,4 +175,4 @@ def make_shield_policy(
     if mode == "handover":
         kwargs: dict[str, Any] = {"reward": reward} if (fallback == "teacher" and reward) else {}
         fb = build_policy(fallback, scenario, **kwargs)
-    return ShieldPolicy(student, fb, thr, signal, mode, slow_factor, name=name)
+    return ShieldPolicy(student, fb, thr, signal, mode, slow_factor, name=name, hold=hold)
