@@ -77,7 +77,8 @@ class ShieldPolicy:
             fix = f"use {default(ShieldPolicy, 'slow_factor')}"
             raise ConfigError(expect("slow_factor", "in [0, 1]", slow_factor, fix))
         if not (isinstance(hold, int) and hold >= 0):
-            raise ConfigError(expect("shield hold", "an integer >= 0 [steps]", hold, "use 0"))
+            fix = f"use {default(ShieldPolicy, 'hold')}"
+            raise ConfigError(expect("shield hold", "an integer >= 0 [steps]", hold, fix))
         self.student = student
         self.fallback = fallback
         self.threshold = float(threshold)
