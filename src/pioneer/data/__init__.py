@@ -40,7 +40,7 @@ STUDENT_SELECT_EPISODES = 100
 # the teacher's own previous label (docs/student.md, "Remedies")
 STUDENT_LABEL_PREV = "teacher"
 # whether each shipped kind also reads its own last command u_{t-1} (--previous-command),
-# chosen on validation episodes for the MDN; the MLP was not measured with it
+# chosen on validation episodes: it helps the MDN, not the MLP (docs/student.md, "Remedies")
 STUDENT_PREVIOUS_COMMAND = {"mdn": True, "mlp": False}
 
 
