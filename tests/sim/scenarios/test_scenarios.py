@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -574,3 +575,35 @@ def test_a_noisy_lidar_works_for_the_teacher(clean_registry, tmp_path):
     sc.load_scenario_file(_write(tmp_path, data))
     rec, _ = run_episode("noisy", build_policy("teacher", "static"), 0)
     assert rec.event in {"success", "collision", "timeout"} and rec.steps > 0
+
+
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.json")), ids=lambda p: p.name)
+def test_every_example_scenario_file_loads(clean_registry, path):
+    """The shipped example files register (each variant places its bodies for the 50 start
+    seeds a scenario file is checked with) and build the worlds they name."""
+    names = clean_registry.load_scenario_file(path)
+    assert sorted(names) == sorted(json.loads(path.read_text())["scenarios"])
+    for name in names:
+        assert clean_registry.get_scenario(name).name == name
+
+
+def test_the_exiting_passenger_example_changes_only_the_exiting_passenger(clean_registry):
+    clean_registry.load_scenario_file(EXAMPLES / "exiting_passenger.json")
+    base = get_scenario("hr-rl")
+
+    def exiting(name: str) -> list:
+        return [h for h in get_scenario(name).humans if h.role == "exiting"]
+
+    assert exiting("hr-exit-none") == []
+    late, early, paper = exiting("hr-exit-late"), exiting("hr-exit-early"), exiting("hr-rl")
+    assert late[0].start.y[0] > paper[0].start.y[1]  # starts deeper than the paper's 0.9–1.5 m
+    assert early[0].start.y[1] == pytest.approx(paper[0].start.y[0])  # … or nearer the door
+    for name in ("hr-exit-late", "hr-exit-early"):
+        world = get_scenario(name)
+        assert world.walls == base.walls
+        assert [h for h in world.humans if h.role == "boarding"] == [
+            h for h in base.humans if h.role == "boarding"
+        ]
