@@ -20,7 +20,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, InvalidStateError, ProcessPoolExecutor, wait
 from multiprocessing.connection import wait as wait_ready
 from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any, TypeVar
@@ -115,10 +115,34 @@ def spawn_pool(
     try:
         yield pool
     except BaseException:
-        _kill(ctx.workers)  # the pool finds them dead, fails the pending tasks and stops
-        pool.shutdown(wait=True, cancel_futures=True)
+        with _quiet_broken_pool():
+            _kill(ctx.workers)  # the pool finds them dead, fails the pending tasks and stops
+            pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def _quiet_broken_pool() -> Iterator[None]:
+    """Keep the pool's manager thread from printing a traceback while a failed pool stops.
+
+    Python 3.11's ``ProcessPoolExecutor``, finding its workers dead, fails every pending task,
+    including one that ``shutdown(cancel_futures=True)`` has just cancelled: setting the
+    exception of a cancelled future raises ``InvalidStateError`` in its manager thread, whose
+    traceback would precede the one error line the run ends with (about one stop in four, a
+    race). That exception, and only that one, is dropped; the thread has failed every other
+    task by then."""
+    previous = threading.excepthook
+
+    def hook(args: threading.ExceptHookArgs) -> None:
+        if not isinstance(args.exc_value, InvalidStateError):
+            previous(args)
+
+    threading.excepthook = hook
+    try:
+        yield
+    finally:
+        threading.excepthook = previous
 
 
 def bounded_map(

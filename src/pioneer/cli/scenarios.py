@@ -24,7 +24,11 @@ from pioneer.cli._common import (
 from pioneer.experiments.calibration import calibrate
 from pioneer.experiments.reproduce import SCENARIOS
 from pioneer.io import inside, output_dir
-from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_variants
+from pioneer.sim.scenarios.distribution import (
+    MIN_PLACEMENT_RATE,
+    LayoutDistribution,
+    sample_variants,
+)
 
 if TYPE_CHECKING:
     from pioneer.sim.scenarios import ScenarioConfig
@@ -134,10 +138,19 @@ class SampleLayouts:
         variants, rejected = sample_variants(self.dist, self.n, self.seed, self.prefix)
         doc = {
             "format": SCENARIO_FILE_FORMAT,
-            "distribution": {**self.dist.to_dict(), "seed": self.seed, "rejected_draws": rejected},
+            "distribution": {
+                **self.dist.to_dict(),
+                "seed": self.seed,
+                "rejected_draws": rejected,
+                "min_placement_rate": MIN_PLACEMENT_RATE,
+            },
             "scenarios": variants,
         }
         write_text_atomic(self.out, to_json(doc, indent=1) + "\n")
-        print(f"{len(variants)} layouts ({rejected} draws could not place their bodies): ", end="")
+        print(
+            f"{len(variants)} layouts ({rejected} draws redrawn: their bodies not placed, or "
+            f"placed in under {MIN_PLACEMENT_RATE:.0%} of the start-state draws): ",
+            end="",
+        )
         print(self.out)
         return 0

@@ -18,7 +18,7 @@ from pioneer.sim.scenarios import (
 )
 from pioneer.sim.scenarios import registry as scenarios
 from pioneer.sim.scenarios.distribution import LayoutDistribution, sample_layout, sample_variants
-from pioneer_testutils import assert_house_message, run_cli
+from pioneer_testutils import assert_house_message, run_cli, states_equal
 
 
 @pytest.fixture
@@ -52,6 +52,34 @@ def test_sampled_layouts_are_valid_scenarios(seed, tmp_path, clean_registry):
         for s in range(10):  # every start state is collision-free, nobody outside the walls
             st = sample_state(cfg, np.random.default_rng(1000 + s))
             assert st.gap[0] > 0.0 and st.wall_gap[0] > 0.0
+
+
+def test_kept_layouts_are_loose_enough_for_every_seed(clean_registry, tmp_path):
+    """A kept layout places its bodies in >= MIN_PLACEMENT_RATE of its start-state draws (so
+    no episode seed exhausts MAX_TRIES); checked beyond the 50 seeds it was chosen on, in the
+    tight corner (large people, one or two exiting passengers) where layouts of 0.2 % were kept
+    before and stopped a DAgger run."""
+    from pioneer.sim.scenarios.distribution import MIN_PLACEMENT_RATE
+    from pioneer.sim.scenarios.registry import PLACEMENT_CHECK_SEEDS, check_placement
+    from pioneer.sim.scenarios.sampling import sample_state_counted
+    from pioneer.sim.scenarios.spec import MAX_TRIES
+
+    assert check_placement("hr-rl", get_scenario("hr-rl")) == PLACEMENT_CHECK_SEEDS
+    dist = LayoutDistribution(n_exiting=(1, 2), human_radius=(0.45, 0.65))
+    variants, rejected = sample_variants(dist, 6, 2, prefix="tight")  # seed 2 kept 0.2 % before
+    assert rejected > 0  # this corner does hold layouts too tight to keep
+    path = tmp_path / "tight.json"
+    path.write_text(json.dumps({"format": SCENARIO_FILE_FORMAT, "scenarios": variants}))
+    for name in scenarios.load_scenario_file(path):
+        cfg = get_scenario(name)
+        draws = check_placement(name, cfg)
+        assert PLACEMENT_CHECK_SEEDS / draws >= MIN_PLACEMENT_RATE
+        worst = max(
+            sample_state_counted(cfg, np.random.default_rng(10_000 + s))[1] for s in range(100)
+        )
+        assert worst < MAX_TRIES / 4, name
+    state, draws = sample_state_counted(get_scenario("hr-rl"), np.random.default_rng(5))
+    assert states_equal(state, sample_state(get_scenario("hr-rl"), np.random.default_rng(5)))
 
 
 def test_the_same_seed_gives_the_same_layouts():

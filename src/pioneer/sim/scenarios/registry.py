@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -23,7 +24,7 @@ from pioneer.sim.scenarios.layouts import (
     elevator_scenario,
     static_study_scenario,
 )
-from pioneer.sim.scenarios.sampling import sample_state
+from pioneer.sim.scenarios.sampling import sample_state_counted
 from pioneer.sim.scenarios.spec import ScenarioConfig
 from pioneer.sim.world import SimConfig
 
@@ -121,16 +122,22 @@ def register_scenario(
     _SOURCES.pop(_key(name), None)
 
 
-def check_placement(where: str, cfg: ScenarioConfig) -> None:
+def check_placement(where: str, cfg: ScenarioConfig, budget: float = math.inf) -> int:
     """Draw the start states of seeds 0–49: a layout too tight for some of them would stop an
-    evaluation in the middle (≈ 1 ms per seed when it fits)."""
+    evaluation in the middle (≈ 1 ms per seed when it fits). Returns the draws they took in
+    all (50 when every first draw placed every body), or stops early with the count so far
+    once it exceeds ``budget``."""
+    draws = 0
     for seed in range(PLACEMENT_CHECK_SEEDS):
+        if draws > budget:
+            break
         try:
-            sample_state(cfg, np.random.default_rng(seed))
+            draws += sample_state_counted(cfg, np.random.default_rng(seed))[1]
         except ScenarioError as exc:
             raise ScenarioError(
                 f"{where}: start state for seed {seed} (of {PLACEMENT_CHECK_SEEDS} checked): {exc}"
             ) from exc
+    return draws
 
 
 def _register(name: str, factory: Callable[[], ScenarioConfig], base: str | None) -> None:

@@ -17,13 +17,19 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
 
     Every draw comes from ``rng`` in a fixed order, so the same seed gives the same state.
     """
+    return sample_state_counted(cfg, rng)[0]
+
+
+def sample_state_counted(cfg: ScenarioConfig, rng: np.random.Generator) -> tuple[State, int]:
+    """:func:`sample_state` and the number of draws it took (1 = the first placed every
+    body): how tight a layout is for its start regions."""
     walls = np.asarray(cfg.walls, dtype=np.float64).reshape(-1, 4)
     r_r = cfg.sim.robot.radius
     gap = cfg.min_start_gap
     n = len(cfg.humans)
     n_wp = [len(h.waypoints) + 1 for h in cfg.humans]
     w_max = max(n_wp, default=1)
-    for _ in range(MAX_TRIES):
+    for draws in range(1, MAX_TRIES + 1):  # noqa: B007 - returned with the state
         p_r = cfg.robot_start.sample(rng)
         heading = rng.uniform(*cfg.robot_heading)
         goal = cfg.robot_goal.sample(rng)
@@ -51,7 +57,7 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
             )
         )
     status = np.array([ARRIVED if h.static else WALKING for h in cfg.humans], dtype=np.int8)
-    return State(
+    state = State(
         robot=np.array([[p_r[0], p_r[1], heading]]),
         command=np.zeros((1, 2)),
         goal=goal.reshape(1, 2),
@@ -85,6 +91,7 @@ def sample_state(cfg: ScenarioConfig, rng: np.random.Generator) -> State:
         ).reshape(1, n),
         h_reacts=np.array([h.reacts_to_robot for h in cfg.humans], dtype=np.bool_).reshape(1, n),
     )
+    return state, draws
 
 
 def _min_gap(p_r: np.ndarray, pos: np.ndarray, cfg: ScenarioConfig, r_r: float) -> float:
