@@ -310,5 +310,7 @@ def test_scenarios_command_lists_variants_and_draws_them(variant_file, tmp_path,
     assert rows["hr-rl-wide"][1] == "hr-rl"  # the variant's learned parts
     assert rows["static-short"][1] == "static-short" and rows["hr-rl-r03"][1] == "hr-rl"
     assert rows["static-short"][-1] == "3.0"  # its time limit [s]
+    assert rows["hr-rl"][-2] == "100"  # every start-state draw places every body
+    assert "placed [%]" in text.splitlines()[0]
     pngs = sorted(p.stem for p in out.glob("*.png"))
     assert {"hr-rl", "hl-rr", "static", "hr-rl-wide", "static-short"} <= set(pngs)
