@@ -52,7 +52,7 @@ class Scenarios:
         """Print one row per scenario; draw them if asked. "placed [%]" is the share of
         start-state draws that placed every body for the seeds a scenario file is checked with:
         how tight the start regions are (``sample-layouts`` keeps layouts of at least
-        ``MIN_PLACEMENT_RATE``; a start state gives up after 2,000 draws)."""
+        ``MIN_PLACEMENT_RATE``; a start state gives up after ``spec.MAX_TRIES`` draws)."""
         from pioneer.data import base_scenario
         from pioneer.sim.scenarios import get_scenario, scenario_names
 

@@ -151,20 +151,17 @@ def sample_variants(
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
     variants: dict[str, dict[str, Any]] = {}
     rejected = 0
+    budget = PLACEMENT_CHECK_SEEDS / MIN_PLACEMENT_RATE  # [draws] beyond it the rate is too low
     while len(variants) < n:
         for _ in range(MAX_DRAWS):
             layout, sim = sample_layout(dist, rng)
             name = f"{prefix}-{len(variants):04d}"
             try:
-                draws = check_placement(
-                    name,
-                    elevator_scenario(layout, sim=sim, name=name),
-                    budget=PLACEMENT_CHECK_SEEDS / MIN_PLACEMENT_RATE,
-                )
+                draws = check_placement(name, elevator_scenario(layout, sim=sim, name=name), budget)
             except PioneerError:
                 rejected += 1
                 continue
-            if PLACEMENT_CHECK_SEEDS / draws < MIN_PLACEMENT_RATE:
+            if draws > budget:
                 rejected += 1  # placeable for these seeds, but too tight to be sure for all
                 continue
             variants[name] = {
