@@ -91,6 +91,8 @@ def bench_teacher_decision(plan: Plan) -> Result:
     teacher.decide(world, state)
     teacher32 = with_precision(teacher, "float32")
     teacher32.decide(world, state)
+    teacher_fast = with_precision(teacher, "fast")
+    teacher_fast.decide(world, state)
     ro = rollout(world, state, teacher.candidates)
     copies = state.repeat(teacher.candidates.shape[0])
     steps = ro.robot.shape[1]
@@ -114,12 +116,30 @@ def bench_teacher_decision(plan: Plan) -> Result:
         "steps": Case(
             lambda _: advance(world, copies, teacher.candidates, teacher.config.dt, steps)
         ),
+        "steps_lanes": Case(
+            lambda _: advance(
+                world, copies, teacher.candidates, teacher.config.dt, steps, lanes=True
+            )
+        ),
+        "steps_fast": Case(
+            lambda _: advance(
+                world,
+                copies,
+                teacher.candidates,
+                teacher.config.dt,
+                steps,
+                lanes=True,
+                vector_exp=True,
+            )  # fmt: skip
+        ),
         "observe": Case(lambda _: trajectory.observations(world)),
         "density": Case(lambda _: density(feats)),
         "gemm": sgemm_256_case(),
         "decision_f32": Case(lambda _: teacher32.decide(world, state)),
         "episode_f32": Case(along(teacher32)),
         "observe_f32": Case(lambda _: trajectory.observations(world, precision="float32")),
+        "decision_fast": Case(lambda _: teacher_fast.decide(world, state)),
+        "episode_fast": Case(along(teacher_fast)),
     }
     secs = time_cases(cases, plan.batch_repeats, warmup=3)
     gemm = float(np.median(secs["gemm"]))
@@ -131,6 +151,10 @@ def bench_teacher_decision(plan: Plan) -> Result:
     ratio, ratio32 = per_gemm("decision"), per_gemm("decision_f32")
     ratio_episode = per_gemm("episode", len(visited))
     ratio32_episode = per_gemm("episode_f32", len(visited))
+    ratio_fast, ratio_fast_episode = (
+        per_gemm("decision_fast"),
+        per_gemm("episode_fast", len(visited)),
+    )
     inducing = int(density.alpha_.shape[0])  # type: ignore[union-attr]
     flops = 2 * feats.shape[0] * inducing * feats.shape[1]
     return {
@@ -143,6 +167,12 @@ def bench_teacher_decision(plan: Plan) -> Result:
             ),
             "ms_rollout_120x10": metric(secs["rollout"] * 1e3, "ms"),
             "ms_rollout_steps": metric(secs["steps"] * 1e3, "ms"),
+            "ms_rollout_steps_lanes": metric(secs["steps_lanes"] * 1e3, "ms"),
+            "ms_rollout_steps_fast": metric(secs["steps_fast"] * 1e3, "ms"),
+            "x_speedup_lanes_steps": metric(
+                [median_ratio(secs["steps"], secs["steps_lanes"])], "x"
+            ),
+            "x_speedup_fast_steps": metric([median_ratio(secs["steps"], secs["steps_fast"])], "x"),
             "ms_rollout_observe": metric(secs["observe"] * 1e3, "ms"),
             "ms_density_1200": metric(secs["density"] * 1e3, "ms"),
             "ratio_decision_over_sgemm_256": metric([ratio], "x", ("<=", 8.0)),
@@ -164,6 +194,12 @@ def bench_teacher_decision(plan: Plan) -> Result:
             "x_speedup_float32_observe": metric(
                 [median_ratio(secs["observe"], secs["observe_f32"])], "x"
             ),
+            "ms_decision_fast": metric(secs["decision_fast"] * 1e3, "ms"),
+            "ms_decision_episode_mean_fast": metric(
+                secs["episode_fast"] * 1e3 / len(visited), "ms"
+            ),
+            "ratio_decision_fast_over_sgemm_256": metric([ratio_fast], "x"),
+            "ratio_decision_episode_mean_fast_over_sgemm_256": metric([ratio_fast_episode], "x"),
         },
         "info": {
             "episode_states": f"{len(visited)} states, every 10th of a teacher episode "
@@ -177,11 +213,13 @@ def bench_teacher_decision(plan: Plan) -> Result:
 
 
 def bench_teacher_equivalence(plan: Plan) -> Result:
-    """Does the teacher with float32 rays choose what the float64 reference chooses? Over the
-    decision inputs of ``plan.equivalence_seeds`` seeded reference-teacher episodes in each of
-    HR-RL and HL-RR (every state: a few thousand), the share of states with the same candidate
-    (target >= 99 %) and, where not, the reference-score loss of the float32 choice (target <
-    the stated tolerance), by :func:`pioneer.control.precision.compare_precision`."""
+    """Does the teacher with faster arithmetic choose what the float64 reference chooses? Over
+    the decision inputs of ``plan.equivalence_seeds`` seeded reference-teacher episodes in each
+    of HR-RL and HL-RR (every state: a few thousand), for float32 rays (the metrics without a
+    suffix) and for the ``fast`` rollouts (float32 rays and the lanes' vectorised e^x: the
+    ``_fast`` metrics), the share of states with the same candidate (target >= 99 %) and,
+    where not, the reference-score loss of the other choice (target < the stated tolerance),
+    by :func:`pioneer.control.precision.compare_precision`."""
     from pioneer.control.precision import (
         MIN_SAME_SHARE,
         SCORE_TOLERANCE,
@@ -191,29 +229,27 @@ def bench_teacher_equivalence(plan: Plan) -> Result:
     from pioneer.control.teacher import make_teacher
 
     seeds = range(SEED + 50, SEED + 50 + plan.equivalence_seeds)
-    reports = {
-        scenario: compare_precision(make_teacher(scenario), record_decision_inputs(scenario, seeds))
-        for scenario in ("hr-rl", "hl-rr")
-    }
-    n_states = sum(r.n_states for r in reports.values())
-    n_same = sum(r.n_same for r in reports.values())
-    loss = max(r.max_score_loss for r in reports.values())
-    change = max(r.max_score_change for r in reports.values())
-    return {
-        "metrics": {
-            "pct_same_candidate": metric(
-                [100.0 * n_same / n_states], "%", (">=", 100.0 * MIN_SAME_SHARE)
-            ),
-            "max_score_loss": metric([loss], "score", ("<", SCORE_TOLERANCE)),
-            "max_score_change": metric([change], "score"),
-        },
-        "info": {
-            "states": n_states,
-            "seeds": f"{seeds.start}..{seeds.stop - 1} in each scenario",
-            "per_scenario": {k: r.summary() for k, r in reports.items()},
-            "differing_states": {k: list(r.differing) for k, r in reports.items()},
-        },
-    }
+    inputs = {s: record_decision_inputs(s, seeds) for s in ("hr-rl", "hl-rr")}
+    metrics: dict[str, Any] = {}
+    info: dict[str, Any] = {"seeds": f"{seeds.start}..{seeds.stop - 1} in each scenario"}
+    for precision, suffix in (("float32", ""), ("fast", "_fast")):
+        reports = {
+            scenario: compare_precision(make_teacher(scenario), states, precision)
+            for scenario, states in inputs.items()
+        }
+        n_states = sum(r.n_states for r in reports.values())
+        n_same = sum(r.n_same for r in reports.values())
+        loss = max(r.max_score_loss for r in reports.values())
+        change = max(r.max_score_change for r in reports.values())
+        metrics[f"pct_same_candidate{suffix}"] = metric(
+            [100.0 * n_same / n_states], "%", (">=", 100.0 * MIN_SAME_SHARE)
+        )
+        metrics[f"max_score_loss{suffix}"] = metric([loss], "score", ("<", SCORE_TOLERANCE))
+        metrics[f"max_score_change{suffix}"] = metric([change], "score")
+        info["states"] = n_states
+        info[f"per_scenario{suffix}"] = {k: r.summary() for k, r in reports.items()}
+        info[f"differing_states{suffix}"] = {k: list(r.differing) for k, r in reports.items()}
+    return {"metrics": metrics, "info": info}
 
 
 def _teacher_episode_states(seed: int, every: int) -> list[tuple[Any, Any]]:

@@ -1,11 +1,14 @@
-"""Does the teacher choose the same with float32 rays? The equivalence check of its precision.
+"""Does the teacher choose the same with faster arithmetic? The equivalence check of its precision.
 
-The teacher may observe its rollouts with float32 ray casting (``TeacherConfig.precision``,
-docs/performance.md "Float32 rays for the teacher"): the ranges then differ from the float64
-reference in their last bits, the scores in about the seventh digit — except where a beam
-grazes an obstacle so closely that it hits in one precision and misses in the other — and
-the chosen candidate only where two candidates' scores nearly tie.
-:func:`compare_precision` measures that on recorded decision inputs
+The teacher's rollouts have three precisions (``TeacherConfig.precision``,
+:data:`pioneer.control.rollout.RolloutPrecision`; docs/performance.md): ``"float64"``, the
+reference; ``"float32"``, float32 ray casting of the rollout states ("Float32 rays for the
+teacher"); ``"fast"``, float32 rays and the social forces' exponentials by a vectorised e^x
+within 2 ulp of libm's ("The rollout in SIMD lanes"). The ranges, and with ``"fast"`` the
+predicted people too, then differ from the reference in their last bits, the scores in
+about the seventh digit — except where a beam grazes an obstacle so closely that it hits in
+one precision and misses in the other — and the chosen candidate only where two candidates'
+scores nearly tie. :func:`compare_precision` measures that on recorded decision inputs
 (:func:`record_decision_inputs`): the share of states where both paths choose the same
 candidate, and where they do not, how much worse the other path's choice is under the
 reference scores. The switch is acceptable when the share is at least ``MIN_SAME_SHARE`` and
@@ -20,10 +23,10 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.control.rollout import RolloutPrecision
 from pioneer.control.teacher import LookaheadTeacher, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
-from pioneer.sim.lidar import RayPrecision
 from pioneer.sim.world import State, World
 
 __all__ = [
@@ -87,7 +90,7 @@ def record_decision_inputs(
 class PrecisionReport:
     """Both paths' choices over a set of decision inputs (:func:`compare_precision`)."""
 
-    precision: RayPrecision  # the path compared with the float64 reference
+    precision: RolloutPrecision  # the path compared with the float64 reference
     n_states: int
     n_same: int  # states where both choose the same candidate (or both none)
     differing: tuple[int, ...]  # indices of the other states in the input set
@@ -121,7 +124,7 @@ class PrecisionReport:
         )
 
 
-def with_precision(teacher: LookaheadTeacher, precision: RayPrecision) -> LookaheadTeacher:
+def with_precision(teacher: LookaheadTeacher, precision: RolloutPrecision) -> LookaheadTeacher:
     """A new teacher with ``teacher``'s reward, features, settings, extra score and name, whose
     rollouts are observed with ``precision`` rays (``TeacherConfig.precision``)."""
     cfg = dataclasses.replace(teacher.config, precision=precision)
@@ -140,7 +143,7 @@ def chosen_index(scores: F64) -> int:
 def compare_precision(
     teacher: LookaheadTeacher,
     inputs: Sequence[DecisionInput],
-    precision: RayPrecision = "float32",
+    precision: RolloutPrecision = "float32",
     tolerance: float = SCORE_TOLERANCE,
 ) -> PrecisionReport:
     """Score every input with ``teacher``'s reward and settings twice — with float64 rays (the

@@ -12,10 +12,14 @@ of the teacher's copy-steps in the paper world are not simulated or observed; ev
 non-colliding candidate's rollout is the same, bit for bit). The constant-velocity option
 keeps stepping colliding candidates.
 
-The rollout states are observed with the reference float64 ray casting, or with float32 beam
-loops (``precision="float32"``, docs/performance.md "Float32 rays for the teacher"): the
-observations (float32 either way) then differ in the last bits, and the teacher's choice
-only where candidates nearly tie (:mod:`pioneer.control.precision` measures how often).
+The privileged rollout runs its copies in SIMD lanes (``advance(..., lanes=True)``, bit for
+bit the reference kernel's values; tested). Its arithmetic has three precisions
+(:data:`RolloutPrecision`, docs/performance.md): ``"float64"``, the reference; ``"float32"``,
+float32 beam loops in the observation of the rollout states (the observations, float32
+either way, then differ in the last bits); ``"fast"``, float32 beams and the social forces'
+exponentials by a vectorised e^x within 2 ulp of libm's (the rollouts then differ in the
+last bits too). The teacher's choice differs only where candidates nearly tie
+(:mod:`pioneer.control.precision` measures how often).
 """
 
 from __future__ import annotations
@@ -32,10 +36,20 @@ from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import ARRIVED, GONE
-from pioneer.sim.lidar import RAY_PRECISION, RayPrecision, ray_dtype
+from pioneer.sim.lidar import RayPrecision
 from pioneer.sim.world import State, World, advance, observe_states, step
 
-__all__ = ["HORIZON", "HUMAN_MODEL", "STEP", "HumanModel", "Rollout", "rollout"]
+__all__ = [
+    "HORIZON",
+    "HUMAN_MODEL",
+    "ROLLOUT_PRECISION",
+    "STEP",
+    "HumanModel",
+    "Rollout",
+    "RolloutPrecision",
+    "ray_precision",
+    "rollout",
+]
 
 F64 = NDArray[np.float64]
 HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the people
@@ -43,6 +57,19 @@ HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the
 HORIZON = 3.0  # [s] T, each candidate held this long
 STEP = 0.3  # [s] Δt of a rollout step
 HUMAN_MODEL: HumanModel = "privileged"
+# The arithmetic of the rollouts (module docstring); "float64" is the reference.
+RolloutPrecision = Literal["float64", "float32", "fast"]
+ROLLOUT_PRECISION: RolloutPrecision = "float64"
+
+
+def ray_precision(precision: RolloutPrecision) -> RayPrecision:
+    """The ray casting of a rollout precision (``"fast"`` casts float32 beams); an unknown
+    precision is refused."""
+    if precision not in typing.get_args(RolloutPrecision):
+        raise ConfigError(
+            expect("rollout precision", "'float64', 'float32' or 'fast'", precision, "pick one")
+        )
+    return "float64" if precision == "float64" else "float32"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,10 +114,10 @@ def rollout(
     horizon: float = HORIZON,
     dt: float = STEP,
     human_model: HumanModel = HUMAN_MODEL,
-    precision: RayPrecision = RAY_PRECISION,
+    precision: RolloutPrecision = ROLLOUT_PRECISION,
 ) -> Rollout:
     """Roll every command of ``commands (C, 2)`` forward from ``state`` (B = 1); ``precision``
-    is that of the ray casting that observes the rollout states (module docstring)."""
+    is that of the rollout's arithmetic (module docstring)."""
     if state.batch_size != 1:
         raise ConfigError(
             expect("rollout state", "a single state (B = 1)", state.batch_size, "take(i)")
@@ -99,7 +126,7 @@ def rollout(
         raise ConfigError(
             expect("human_model", "'privileged' or 'constant_velocity'", human_model, "pick one")
         )
-    ray_dtype(precision)  # an unknown precision is refused here, not when observing
+    rays = ray_precision(precision)  # an unknown precision is refused here, not when observing
     n_steps = math.floor(horizon / dt + 1e-9)
     if n_steps < 1:
         raise ConfigError(
@@ -108,12 +135,15 @@ def rollout(
     c = commands.shape[0]
     s = state.repeat(c)
     if human_model == "privileged":
-        tr = advance(world, s, commands, dt, n_steps, stop_at_collision=True)
+        tr = advance(
+            world, s, commands, dt, n_steps, stop_at_collision=True, lanes=True,
+            vector_exp=precision == "fast",
+        )  # fmt: skip
         hit = tr.final.collided
         return Rollout(
             commands, tr.poses, hit.copy(), tr.gap, tr.wall_gap, tr.final,
             np.where(hit, tr.live_steps, n_steps + 1),
-            functools.partial(tr.observations, world, precision=precision),
+            functools.partial(tr.observations, world, precision=rays),
         )  # fmt: skip
     # Constant velocity: freeze the social-force model and move the humans along their current
     # velocity after each step, then check the robot against the moved humans too.
@@ -138,7 +168,7 @@ def rollout(
         states.append(s)
         np.minimum(clear, s.gap, out=clear)
         np.minimum(wclear, s.wall_gap, out=wclear)
-    obs = observe_states(world, states, precision)
+    obs = observe_states(world, states, rays)
     obs = np.ascontiguousarray(obs.transpose(1, 0, 2))  # (C, L, 29)
     return Rollout(
         commands, robot, s.collided.copy(), clear, wclear, s, first,

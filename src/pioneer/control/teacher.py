@@ -31,14 +31,22 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegative, Positive
 from pioneer.config import Config
-from pioneer.control.rollout import HORIZON, HUMAN_MODEL, STEP, HumanModel, Rollout, rollout
+from pioneer.control.rollout import (
+    HORIZON,
+    HUMAN_MODEL,
+    ROLLOUT_PRECISION,
+    STEP,
+    HumanModel,
+    Rollout,
+    RolloutPrecision,
+    rollout,
+)
 from pioneer.envs.policy import Decision
 from pioneer.limits import OMEGA_MAX
 from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
-from pioneer.sim.lidar import RAY_PRECISION, RayPrecision
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
 
@@ -88,9 +96,10 @@ class TeacherConfig(Config):
     horizon: Positive = HORIZON  # [s] T
     dt: Positive = STEP  # [s] rollout step Δt
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
-    # The ray casting that observes the rollouts: "float64" (the reference) or "float32"
-    # (faster; checked against the reference by pioneer.control.precision).
-    precision: RayPrecision = RAY_PRECISION
+    # The rollouts' arithmetic: "float64" (the reference), "float32" (float32 rays) or "fast"
+    # (float32 rays, vectorised e^x; each checked against the reference by
+    # pioneer.control.precision).
+    precision: RolloutPrecision = ROLLOUT_PRECISION
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
     margins: SoftMargins = SoftMargins()  # gaps preferred among the feasible candidates
@@ -283,14 +292,14 @@ def make_teacher(
     human_margin: float = SoftMargins.human,
     wall_margin: float = SoftMargins.wall,
     margin_tiers: int = SoftMargins.tiers,
-    precision: RayPrecision = TeacherConfig.precision,
+    precision: RolloutPrecision = TeacherConfig.precision,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
-    (:class:`SoftMargins`); ``precision`` the rollouts' ray casting (float64, the reference, or
-    float32: :mod:`pioneer.control.precision`)."""
+    (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (float64, the reference,
+    float32 rays, or fast: :mod:`pioneer.control.precision`)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
