@@ -130,7 +130,7 @@ def bench_teacher_decision(plan: Plan) -> Result:
                 steps,
                 lanes=True,
                 vector_exp=True,
-            )  # fmt: skip
+            )
         ),
         "observe": Case(lambda _: trajectory.observations(world)),
         "density": Case(lambda _: density(feats)),
@@ -226,13 +226,15 @@ def bench_teacher_equivalence(plan: Plan) -> Result:
         compare_precision,
         record_decision_inputs,
     )
+    from pioneer.control.rollout import RolloutPrecision
     from pioneer.control.teacher import make_teacher
 
     seeds = range(SEED + 50, SEED + 50 + plan.equivalence_seeds)
     inputs = {s: record_decision_inputs(s, seeds) for s in ("hr-rl", "hl-rr")}
     metrics: dict[str, Any] = {}
     info: dict[str, Any] = {"seeds": f"{seeds.start}..{seeds.stop - 1} in each scenario"}
-    for precision, suffix in (("float32", ""), ("fast", "_fast")):
+    paths: tuple[tuple[RolloutPrecision, str], ...] = (("float32", ""), ("fast", "_fast"))
+    for precision, suffix in paths:
         reports = {
             scenario: compare_precision(make_teacher(scenario), states, precision)
             for scenario, states in inputs.items()

@@ -1,5 +1,6 @@
-"""The teacher with float32 rays (``TeacherConfig.precision``): it chooses what the float64
-reference chooses on recorded teacher states, and a seeded run of it repeats bit for bit."""
+"""The teacher with faster arithmetic (``TeacherConfig.precision``: float32 rays, or the fast
+rollouts): it chooses what the float64 reference chooses on recorded teacher states, and a
+seeded run of it repeats bit for bit."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pioneer.control.precision import (
     record_decision_inputs,
     with_precision,
 )
-from pioneer.control.rollout import rollout
+from pioneer.control.rollout import RolloutPrecision, rollout
 from pioneer.control.teacher import (
     LookaheadTeacher,
     TeacherConfig,
@@ -54,6 +55,9 @@ def test_the_precision_is_a_teacher_parameter_that_runs_record():
     assert isinstance(teacher, LookaheadTeacher) and teacher.config.precision == "float32"
     assert made_by(spec, "hr-rl")["params"]["precision"] == "float32"
     assert made_by(PolicySpec.parse("teacher"), "hr-rl")["params"]["precision"] == "float64"
+    fast = PolicySpec.parse("teacher:precision=fast")
+    assert build_policy(fast.name, "hr-rl", **dict(fast.kwargs)).config.precision == "fast"
+    assert made_by(fast, "hr-rl")["params"]["precision"] == "fast"
 
 
 def test_an_unknown_precision_is_refused_with_the_fix():
@@ -102,11 +106,13 @@ def test_recorded_inputs_are_the_teachers_own(recorded):
     assert [d.state for d in sparse] == [d.state for d in inputs[::5]]
 
 
+@pytest.mark.parametrize("precision", ["float32", "fast"])
 @pytest.mark.parametrize("scenario", SCENARIOS)
-def test_float32_rays_choose_the_reference_candidate(recorded, scenario):
-    """The acceptance of float32 rays on a small recorded set: the same candidate in >= 99 %
-    of the states, and where not, a reference-score loss below the stated tolerance."""
-    report = compare_precision(make_teacher(scenario), recorded[scenario])
+def test_faster_precisions_choose_the_reference_candidate(recorded, scenario, precision):
+    """The acceptance of float32 rays, and of the fast rollouts (float32 rays, vectorised
+    e^x), on a small recorded set: the same candidate in >= 99 % of the states, and where not,
+    a reference-score loss below the stated tolerance."""
+    report = compare_precision(make_teacher(scenario), recorded[scenario], precision)
     assert report.n_states == len(recorded[scenario]) >= 100
     assert report.same_share >= MIN_SAME_SHARE, report.summary()
     assert report.max_score_loss < SCORE_TOLERANCE, report.summary()
@@ -136,8 +142,10 @@ def test_a_report_names_the_loss_of_differing_states():
     assert not far.equivalent  # a loss beyond the tolerance
 
 
-def _float32_episode(seed: int) -> tuple[list[np.ndarray], list[TeacherDecision]]:
-    teacher = with_precision(make_teacher("hr-rl"), "float32")
+def _episode(
+    seed: int, precision: RolloutPrecision
+) -> tuple[list[np.ndarray], list[TeacherDecision]]:
+    teacher = with_precision(make_teacher("hr-rl"), precision)
     commands: list[np.ndarray] = []
     decisions: list[TeacherDecision] = []
 
@@ -150,10 +158,11 @@ def _float32_episode(seed: int) -> tuple[list[np.ndarray], list[TeacherDecision]
     return commands, decisions
 
 
-def test_float32_teacher_is_deterministic():
+@pytest.mark.parametrize("precision", ["float32", "fast"])
+def test_faster_teachers_are_deterministic(precision):
     """The same seed twice in one process: bit-identical commands and per-term scores."""
-    first_cmd, first = _float32_episode(11)
-    second_cmd, second = _float32_episode(11)
+    first_cmd, first = _episode(11, precision)
+    second_cmd, second = _episode(11, precision)
     assert len(first) == len(second) > 10
     for a, b, ca, cb in zip(first, second, first_cmd, second_cmd, strict=True):
         assert np.array_equal(ca, cb)

@@ -113,7 +113,7 @@ def _swap_lanes(a: Any, p: int, q: int) -> None:
 
 
 @njit(cache=True, error_model="numpy")
-def trajectory_kernel_lanes(  # noqa: C901 — one kernel, its passes in the reference's order
+def trajectory_kernel_lanes(
     step_args: tuple[Any, ...],  # the arguments of kernel.step_kernel (world.step_kernel_args)
     poses: F64,  # (B, L, 3) out: the robot pose after each step
     circles: F64,  # (B, L, N, 3) out: the humans after each step as x, y, r (0: gone)
