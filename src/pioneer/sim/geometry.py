@@ -34,13 +34,14 @@ def norm2d(x: float, y: float) -> float:
 def closest_point_on_segment(
     px: float, py: float, x1: float, y1: float, x2: float, y2: float
 ) -> tuple[float, float]:
-    """Closest point to ``(px, py)`` on the segment ``(x1, y1)–(x2, y2)``."""
+    """Closest point to ``(px, py)`` on the segment ``(x1, y1)–(x2, y2)``.
+
+    Branch-free (a select, not an early return), so that a loop over many segments or
+    copies vectorises: a point segment (‖e‖ = 0) takes s = 0, and x1 + 0 · e is x1."""
     ex = x2 - x1
     ey = y2 - y1
     ll = ex * ex + ey * ey
-    if ll <= 0.0:
-        return x1, y1
-    s = ((px - x1) * ex + (py - y1) * ey) / ll
+    s = ((px - x1) * ex + (py - y1) * ey) / ll if ll > 0.0 else 0.0
     s = min(1.0, max(0.0, s))
     return x1 + s * ex, y1 + s * ey
 
@@ -80,7 +81,7 @@ def _cross(ax: float, ay: float, bx: float, by: float) -> float:
     return ax * by - ay * bx
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def segment_segment_distance(
     ax1: float,
     ay1: float,
@@ -91,24 +92,25 @@ def segment_segment_distance(
     bx2: float,
     by2: float,
 ) -> float:
-    """Minimum distance [m] between two segments (0 if they intersect)."""
+    """Minimum distance [m] between two segments (0 if they intersect).
+
+    Branch-free, so that it vectorises over copies (:mod:`pioneer.sim.lanes`): parallel
+    segments (denominator 0) give t, u of ±inf or nan, which no interval test passes."""
     rx = ax2 - ax1
     ry = ay2 - ay1
     sx = bx2 - bx1
     sy = by2 - by1
     denom = _cross(rx, ry, sx, sy)
-    if denom != 0.0:
-        qx = bx1 - ax1
-        qy = by1 - ay1
-        t = _cross(qx, qy, sx, sy) / denom
-        u = _cross(qx, qy, rx, ry) / denom
-        if 0.0 <= t <= 1.0 and 0.0 <= u <= 1.0:
-            return 0.0
+    qx = bx1 - ax1
+    qy = by1 - ay1
+    t = _cross(qx, qy, sx, sy) / denom
+    u = _cross(qx, qy, rx, ry) / denom
+    cross = (denom != 0.0) & (t >= 0.0) & (t <= 1.0) & (u >= 0.0) & (u <= 1.0)
     d = point_segment_distance(ax1, ay1, bx1, by1, bx2, by2)
     d = min(d, point_segment_distance(ax2, ay2, bx1, by1, bx2, by2))
     d = min(d, point_segment_distance(bx1, by1, ax1, ay1, ax2, ay2))
     d = min(d, point_segment_distance(bx2, by2, ax1, ay1, ax2, ay2))
-    return d
+    return 0.0 if cross else d
 
 
 @njit(cache=True, inline="always")

@@ -30,12 +30,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.sim.geometry import (
-    closest_point_on_segment,
-    norm2d,
-    segment_segment_distance,
-    wall_offsets,
-)
+from pioneer.sim.geometry import closest_point_on_segment, norm2d, segment_segment_distance
 from pioneer.sim.humans import ARRIVED, EXP_CUTOFF, GONE, WALKING
 from pioneer.sim.robot import integrate_unicycle
 
@@ -251,7 +246,12 @@ def trajectory_kernel_lanes(
     fy = np.empty((n_h, n_b))
     wall_d = np.empty((n_h, n_b))
     push = np.empty((n_h, n_b), dtype=np.bool_)
-    wall_scr = np.empty((3, m_pad))
+    half = np.empty(n_b)
+    mxs = np.empty(n_b)
+    mys = np.empty(n_b)
+    best = np.empty(n_b)
+    near = np.empty(n_b, dtype=np.int64)
+    dmid = np.empty((m, n_b))
 
     for ln in range(n):
         sag[ln] = v[ln] * h * abs(w[ln] * h) / 8.0
@@ -472,18 +472,46 @@ def trajectory_kernel_lanes(
                     d = norm2d(d0x + sp * ex, d0y + sp * ey)
                     gap = d - r_robot - ri[ln] - sag[ln]
                     cmin[ln] = min(cmin[ln], gap) if pri[ln] else cmin[ln]
+            # The walls as in the reference: the one nearest the chord's midpoint first, then
+            # the others in order, each skipped when the cheap bound cannot lower the minimum.
+            # The midpoint distances and the nearest wall's distance in lanes, the rest (a
+            # wall near a corner) per lane.
             for ln in range(n):
-                half = 0.5 * norm2d(x1[ln] - x[ln], y1[ln] - y[ln])
-                mx = 0.5 * (x[ln] + x1[ln])
-                my = 0.5 * (y[ln] + y1[ln])
-                wall_offsets(mx, my, wall_tab, wall_scr)
-                near = 0
-                for q in range(1, m):
-                    near = q if wall_scr[2, q] < wall_scr[2, near] else near
+                half[ln] = 0.5 * norm2d(x1[ln] - x[ln], y1[ln] - y[ln])
+                mxs[ln] = 0.5 * (x[ln] + x1[ln])
+                mys[ln] = 0.5 * (y[ln] + y1[ln])
+                near[ln] = 0
+            for q in range(m):
+                wx1 = wall_tab[0, q]
+                wy1 = wall_tab[1, q]
+                wex = wall_tab[2, q]
+                wey = wall_tab[3, q]
+                wll = wall_tab[4, q]
+                dq = dmid[q]
+                for ln in range(n):  # wall_offsets' operations for one wall
+                    sp = ((mxs[ln] - wx1) * wex + (mys[ln] - wy1) * wey) / wll
+                    sp = min(1.0, max(0.0, sp))
+                    dq[ln] = norm2d(mxs[ln] - (wx1 + sp * wex), mys[ln] - (wy1 + sp * wey))
+                if q > 0:
+                    for ln in range(n):
+                        near[ln] = q if dq[ln] < best[ln] else near[ln]
+                        best[ln] = dq[ln] if dq[ln] < best[ln] else best[ln]
+                else:
+                    for ln in range(n):
+                        best[ln] = dq[ln]
+            for ln in range(n if m > 0 else 0):
+                q = near[ln]
+                d = segment_segment_distance(
+                    x[ln], y[ln], x1[ln], y1[ln], walls[q, 0], walls[q, 1], walls[q, 2],
+                    walls[q, 3],
+                )  # fmt: skip
+                skip = best[ln] - half[ln] - r_robot - sag[ln] >= wmin[ln]
+                wmin[ln] = wmin[ln] if skip else min(wmin[ln], d - r_robot - sag[ln])
+            for ln in range(n):
                 wm = wmin[ln]
-                for jj in range(m):
-                    q = near if jj == 0 else (jj - 1 if jj <= near else jj)
-                    if wall_scr[2, q] - half - r_robot - sag[ln] >= wm:
+                nr = near[ln]
+                for q in range(m):
+                    if q == nr or dmid[q, ln] - half[ln] - r_robot - sag[ln] >= wm:
                         continue
                     d = segment_segment_distance(
                         x[ln], y[ln], x1[ln], y1[ln], walls[q, 0], walls[q, 1], walls[q, 2],
