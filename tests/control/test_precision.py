@@ -39,9 +39,10 @@ def recorded() -> dict[str, list[DecisionInput]]:
     return {scenario: record_decision_inputs(scenario, [3]) for scenario in SCENARIOS}
 
 
-def test_the_reference_is_the_default():
-    assert TeacherConfig().precision == "float64"
-    assert make_teacher("hr-rl").config.precision == "float64"
+def test_the_fast_rollouts_are_the_default_and_the_reference_stays():
+    assert TeacherConfig().precision == "fast"
+    assert make_teacher("hr-rl").config.precision == "fast"
+    assert make_teacher("hr-rl", precision="float64").config.precision == "float64"
 
 
 def test_the_precision_is_a_teacher_parameter_that_runs_record():
@@ -54,7 +55,7 @@ def test_the_precision_is_a_teacher_parameter_that_runs_record():
     teacher = build_policy(spec.name, "hr-rl", **dict(spec.kwargs))
     assert isinstance(teacher, LookaheadTeacher) and teacher.config.precision == "float32"
     assert made_by(spec, "hr-rl")["params"]["precision"] == "float32"
-    assert made_by(PolicySpec.parse("teacher"), "hr-rl")["params"]["precision"] == "float64"
+    assert made_by(PolicySpec.parse("teacher"), "hr-rl")["params"]["precision"] == "fast"
     fast = PolicySpec.parse("teacher:precision=fast")
     assert build_policy(fast.name, "hr-rl", **dict(fast.kwargs)).config.precision == "fast"
     assert made_by(fast, "hr-rl")["params"]["precision"] == "fast"
@@ -81,7 +82,7 @@ def test_float32_rays_reach_the_rollout_observations(recorded):
     (a beam may flip from hit to miss where it grazes an obstacle: a few entries in 10⁵)."""
     d = recorded["hr-rl"][40]
     teacher = make_teacher("hr-rl")
-    ref = rollout(d.world, d.state, teacher.candidates).obs
+    ref = rollout(d.world, d.state, teacher.candidates, precision="float64").obs
     f32 = rollout(d.world, d.state, teacher.candidates, precision="float32").obs
     assert ref.dtype == f32.dtype == np.float32
     assert not np.array_equal(ref, f32)

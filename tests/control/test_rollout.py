@@ -110,9 +110,11 @@ def test_rollout_observations_match_the_world_observation_of_each_state():
     world = open_world()
     state = make_state((0.0, 0.0, 0.0), goal=(3.0, 0.0), humans=[{"pos": (2.0, 1.5)}])
     cands = TeacherConfig().candidates()[::17]
-    ro = rollout(world, state, cands)
+    ro = rollout(world, state, cands, precision="float64")  # the world observes in float64
     np.testing.assert_array_equal(ro.obs[:, -1], observe(world, ro.final))
     np.testing.assert_array_equal(ro.robot[:, -1], ro.final.robot)
+    fast = rollout(world, state, cands)  # the default: float32 rays, last bits only
+    np.testing.assert_allclose(fast.obs, ro.obs, rtol=0.0, atol=1e-4)
 
 
 def test_rollout_is_deterministic_and_does_not_touch_its_input():

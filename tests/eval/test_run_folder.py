@@ -157,9 +157,10 @@ def test_records_without_made_by_are_refused(tmp_path, capsys):
 
 def test_a_row_recorded_before_a_parameter_existed_resumes_at_its_old_value(tmp_path, capsys):
     """A teacher row written before ``precision`` was a parameter (its ``made_by`` without it)
-    was made with float64 rays: it resumes with them, and is refused with float32."""
+    was made with float64 rays: it resumes with them, and is refused with float32 (and with
+    the default, the fast rollouts)."""
     out = tmp_path / "ev"
-    assert main(_eval(out, "teacher:density=false")) == 0
+    assert main(_eval(out, "teacher:density=false,precision=float64")) == 0
     path = out / EPISODES_FILE
     (rec,) = read_records(path)
     assert rec["made_by"]["params"]["precision"] == PARAMETERS_ADDED["precision"]
@@ -173,7 +174,10 @@ def test_a_row_recorded_before_a_parameter_existed_resumes_at_its_old_value(tmp_
     code = main(_eval(out, "teacher:density=false,precision=float32", trials=2))
     one_error_line(capsys.readouterr().err, code, "params.precision", "'float64'", "float32")
     assert file_tree(tmp_path) == before
-    assert main(_eval(out, "teacher:density=false", trials=2)) == 0
+    code = main(_eval(out, "teacher:density=false", trials=2))
+    one_error_line(capsys.readouterr().err, code, "params.precision", "'float64'", "fast")
+    assert file_tree(tmp_path) == before
+    assert main(_eval(out, "teacher:density=false,precision=float64", trials=2)) == 0
     assert [r["trial"] for r in read_records(path)] == [0, 1]
 
 

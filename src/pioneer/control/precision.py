@@ -3,8 +3,8 @@
 The teacher's rollouts have three precisions (``TeacherConfig.precision``,
 :data:`pioneer.control.rollout.RolloutPrecision`; docs/performance.md): ``"float64"``, the
 reference; ``"float32"``, float32 ray casting of the rollout states ("Float32 rays for the
-teacher"); ``"fast"``, float32 rays and the social forces' exponentials by a vectorised e^x
-within 2 ulp of libm's ("The rollout in SIMD lanes"). The ranges, and with ``"fast"`` the
+teacher"); ``"fast"``, the default, float32 rays and the social forces' exponentials by a
+vectorised e^x within 2 ulp of libm's ("The rollout in SIMD lanes"). The ranges, and with ``"fast"`` the
 predicted people too, then differ from the reference in their last bits, the scores in
 about the seventh digit — except where a beam grazes an obstacle so closely that it hits in
 one precision and misses in the other — and the chosen candidate only where two candidates'
@@ -68,9 +68,10 @@ def record_decision_inputs(
     scenario: str, seeds: Iterable[int], every: int = 1
 ) -> list[DecisionInput]:
     """The inputs of every ``every``-th decision of the reference teacher
-    (``make_teacher(scenario)``) in the seeded episodes of ``scenario``, in order: states as
-    the teacher meets them (people in the door, candidates colliding), not one scene."""
-    teacher = make_teacher(scenario)
+    (``make_teacher(scenario, precision="float64")``) in the seeded episodes of ``scenario``,
+    in order: states as the teacher meets them (people in the door, candidates colliding),
+    not one scene."""
+    teacher = make_teacher(scenario, precision="float64")
     out: list[DecisionInput] = []
     for seed in seeds:
         env = NavEnv(scenario)

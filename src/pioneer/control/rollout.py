@@ -16,10 +16,11 @@ The privileged rollout runs its copies in SIMD lanes (``advance(..., lanes=True)
 bit the reference kernel's values; tested). Its arithmetic has three precisions
 (:data:`RolloutPrecision`, docs/performance.md): ``"float64"``, the reference; ``"float32"``,
 float32 beam loops in the observation of the rollout states (the observations, float32
-either way, then differ in the last bits); ``"fast"``, float32 beams and the social forces'
-exponentials by a vectorised e^x within 2 ulp of libm's (the rollouts then differ in the
-last bits too). The teacher's choice differs only where candidates nearly tie
-(:mod:`pioneer.control.precision` measures how often).
+either way, then differ in the last bits); ``"fast"``, the default, float32 beams and the
+social forces' exponentials by a vectorised e^x within 2 ulp of libm's (the rollouts then
+differ in the last bits too). The teacher's choice differs only where candidates nearly tie
+(:mod:`pioneer.control.precision` measures how often: in none of 2,153 recorded states).
+The simulator's own steps and observations always use the reference arithmetic.
 """
 
 from __future__ import annotations
@@ -57,9 +58,10 @@ HumanModel = Literal["privileged", "constant_velocity"]  # how rollouts move the
 HORIZON = 3.0  # [s] T, each candidate held this long
 STEP = 0.3  # [s] Δt of a rollout step
 HUMAN_MODEL: HumanModel = "privileged"
-# The arithmetic of the rollouts (module docstring); "float64" is the reference.
+# The arithmetic of the rollouts (module docstring); "float64" is the reference, "fast" the
+# default (the same choices in every checked state, 1.3× faster teacher episodes).
 RolloutPrecision = Literal["float64", "float32", "fast"]
-ROLLOUT_PRECISION: RolloutPrecision = "float64"
+ROLLOUT_PRECISION: RolloutPrecision = "fast"
 
 
 def ray_precision(precision: RolloutPrecision) -> RayPrecision:

@@ -96,9 +96,9 @@ class TeacherConfig(Config):
     horizon: Positive = HORIZON  # [s] T
     dt: Positive = STEP  # [s] rollout step Δt
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
-    # The rollouts' arithmetic: "float64" (the reference), "float32" (float32 rays) or "fast"
-    # (float32 rays, vectorised e^x; each checked against the reference by
-    # pioneer.control.precision).
+    # The rollouts' arithmetic: "fast" (float32 rays, vectorised e^x), "float32" (float32
+    # rays) or "float64" (the reference); each checked against the reference by
+    # pioneer.control.precision.
     precision: RolloutPrecision = ROLLOUT_PRECISION
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
@@ -298,8 +298,8 @@ def make_teacher(
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
-    (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (float64, the reference,
-    float32 rays, or fast: :mod:`pioneer.control.precision`)."""
+    (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (fast, the default; float32
+    rays; or float64, the reference: :mod:`pioneer.control.precision`)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
