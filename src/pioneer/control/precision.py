@@ -4,15 +4,15 @@ The teacher's rollouts have three precisions (``TeacherConfig.precision``,
 :data:`pioneer.control.rollout.RolloutPrecision`; docs/performance.md): ``"float64"``, the
 reference; ``"float32"``, float32 ray casting of the rollout states ("Float32 rays for the
 teacher"); ``"fast"``, the default, float32 rays and the social forces' exponentials by a
-vectorised e^x within 2 ulp of libm's ("The rollout in SIMD lanes"). The ranges, and with ``"fast"`` the
-predicted people too, then differ from the reference in their last bits, the scores in
-about the seventh digit — except where a beam grazes an obstacle so closely that it hits in
-one precision and misses in the other — and the chosen candidate only where two candidates'
-scores nearly tie. :func:`compare_precision` measures that on recorded decision inputs
-(:func:`record_decision_inputs`): the share of states where both paths choose the same
-candidate, and where they do not, how much worse the other path's choice is under the
-reference scores. The switch is acceptable when the share is at least ``MIN_SAME_SHARE`` and
-every such loss is below the tolerance.
+vectorised e^x within 2 ulp of libm's ("The rollout in SIMD lanes"). The ranges, and with
+``"fast"`` the predicted people too, then differ from the reference in their last bits, the
+scores in about the seventh digit — except where a beam grazes an obstacle so closely that
+it hits in one precision and misses in the other — and the chosen candidate only where two
+candidates' scores nearly tie. :func:`compare_precision` measures that on recorded decision
+inputs (:func:`record_decision_inputs`): the share of states where both paths choose the
+same candidate, and where they do not, how much worse the other path's choice is under the
+reference scores. A precision is acceptable when the share is at least ``MIN_SAME_SHARE``
+and every such loss is below the tolerance.
 """
 
 from __future__ import annotations
