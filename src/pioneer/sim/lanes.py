@@ -17,8 +17,12 @@ leaving) and the robot's arc (sin/cos).
 
 A copy that collides stops (``skip_collided``, the teacher's candidates): its lane takes
 the last live copy's and the loops shrink, so stopped copies cost nothing, as in the
-reference. ``pioneer.sim.world.advance(..., lanes=True)`` calls it; the reference stays the
-default of ``advance`` and the oracle of the tests.
+reference. ``pioneer.sim.world.advance(..., lanes=True)`` calls it (the teacher's privileged
+rollout does); the reference stays the default of ``advance`` and the oracle of the tests.
+
+The one exception to bit-identity is asked for by name: ``vector_exp`` takes the forces'
+exponentials from :func:`exp_lanes`, a vectorised e^x within 2 ulp of libm's (the teacher's
+``precision="fast"``; docs/performance.md, "The rollout in SIMD lanes").
 """
 
 from __future__ import annotations
@@ -115,11 +119,12 @@ def trajectory_kernel_lanes(
     clear_min: F64,  # (B,) out: the minimum of the step gaps over the L steps
     wclear_min: F64,  # (B,) out: the minimum of the step wall gaps over the L steps
     live_steps: I64,  # (B,) out: how many records of each copy are distinct
-    vector_exp: bool = False,  # e^z by exp_lanes (within 1 ulp), not math.exp (the same bits)
+    vector_exp: bool = False,  # e^z by exp_lanes (within 2 ulp), not math.exp (the same bits)
 ) -> None:
     """What ``kernel.trajectory_kernel`` computes from the same arguments, bit for bit: the
     state arrays of ``step_args`` advanced L = ``poses.shape[1]`` steps in place, and the same
-    records (module docstring)."""
+    records (module docstring). With ``vector_exp`` the social forces' exponentials come from
+    :func:`exp_lanes` instead: the values then differ in their last bits."""
     (
         robot, cmd, cmd_out, v_min, v_max, omega_max, goal, t, path, collided, reached,
         clear_out, wclear_out, hpos, hvel, hrad, hvpref, hwp, hnwp, hwpi, hstatus, hdelay,
