@@ -171,17 +171,20 @@ def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -
 
 
 def jit_cache_warm() -> bool:
-    """Whether numba's on-disk cache already holds the simulator's step kernel (else the first
-    episode of every worker compiles it: ``episode_times().cold_jit_s``)."""
+    """Whether numba's on-disk cache already holds the simulator's step kernel and the
+    teacher's rollout kernel (else the first episode of every worker compiles them:
+    ``episode_times().cold_jit_s``)."""
     from numba.core import config
 
     import pioneer.sim.kernel as kernel
 
-    pattern = "kernel.step_kernel-*.nbi"
+    patterns = ("kernel.step_kernel-*.nbi", "lanes.trajectory_kernel_lanes-*.nbi")
     cache_dir = str(getattr(config, "CACHE_DIR", "") or "")  # NUMBA_CACHE_DIR, read by numba
     if cache_dir:
-        return Path(cache_dir).is_dir() and any(Path(cache_dir).rglob(pattern))
-    return any((Path(kernel.__file__).parent / "__pycache__").glob(pattern))
+        root = Path(cache_dir)
+        return root.is_dir() and all(any(root.rglob(p)) for p in patterns)
+    here = Path(kernel.__file__).parent / "__pycache__"
+    return all(any(here.glob(p)) for p in patterns)
 
 
 def row_times(records: Sequence[dict[str, Any]]) -> dict[str, tuple[int, float]]:
