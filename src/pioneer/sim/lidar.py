@@ -189,12 +189,18 @@ def _observation_kernel(
     beam_angle = np.empty(g_count)  # wrapped angle of every beam, computed once
     for b in range(g_count):
         beam_angle[b] = wrap_angle(2.0 * math.pi * b / g_count)
+    # sector k: beams group·k − shift + j (mod G), j < group — the indices computed once (an
+    # integer modulo per beam and pose cost more than the minima)
+    sector = np.empty((k_count, group), dtype=np.int64)
+    for k in range(k_count):
+        for j in range(group):
+            sector[k, j] = (k * group - shift + j) % g_count
     for p in range(p_count):
-        for k in range(k_count):  # sector k: beams group·k − shift + j (mod G), j < group
-            first = (k * group - shift) % g_count
-            v = ranges[p, first]
+        row = ranges[p]
+        for k in range(k_count):
+            v = row[sector[k, 0]]
             for j in range(1, group):
-                v = min(v, ranges[p, (first + j) % g_count])
+                v = min(v, row[sector[k, j]])
             out[p, k] = v
         # The b smallest raw beams, nearest first; ties keep the lowest beam index first (one
         # pass of a stable insertion into the sorted top b: strict < never passes an equal).
