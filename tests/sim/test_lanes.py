@@ -118,3 +118,20 @@ def test_vector_exp_needs_lanes():
     world, s0, u = _copies("hr-rl", 7, 2)
     with pytest.raises(ConfigError, match="lanes=True"):
         advance(world, s0, u, dt=0.3, n_steps=2, vector_exp=True)
+
+
+def test_lanes_without_people_or_walls():
+    """No people (the static study's world) and no walls (an open world): the loops over them
+    are empty, the rest is the reference's."""
+    from pioneer_testutils import make_state, open_world
+
+    world = open_world()
+    rng = np.random.default_rng(9)
+    for humans in ([], [{"pos": (2.0, 1.5)}]):
+        s0 = make_state((0.0, 0.0, 0.0), goal=(3.0, 0.0), humans=humans).repeat(5)
+        u = np.stack([rng.uniform(0.0, 0.8, 5), rng.uniform(-1.0, 1.0, 5)], axis=1)
+        for stop in (True, False):
+            _assert_same(
+                advance(world, s0, u, dt=0.3, n_steps=6, stop_at_collision=stop),
+                advance(world, s0, u, dt=0.3, n_steps=6, stop_at_collision=stop, lanes=True),
+            )
