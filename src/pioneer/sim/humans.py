@@ -60,6 +60,7 @@ __all__ = [
     "PRESETS",
     "WALKING",
     "SocialForceConfig",
+    "next_waypoint",
     "sfm_substep",
 ]
 
@@ -147,6 +148,29 @@ class SocialForceConfig(Config):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def next_waypoint(
+    waypoints: NDArray[np.float64],  # (B, N, W, 2) [m]
+    b: int,
+    i: int,
+    n_waypoints: int,  # of human i of copy b
+    k: int,  # its current waypoint
+    px: float,
+    py: float,  # its position [m]
+    tol: float,  # [m] an intermediate waypoint this close is passed
+) -> tuple[int, float, float, float, bool]:
+    """The waypoint human ``i`` of copy ``b`` heads for: intermediate waypoints within ``tol``
+    are passed. Returns its index, position, distance and whether it is the final goal."""
+    while True:
+        gx = waypoints[b, i, k, 0]
+        gy = waypoints[b, i, k, 1]
+        dg = norm2d(gx - px, gy - py)
+        last = k >= n_waypoints - 1
+        if last or not dg < tol:
+            return k, gx, gy, dg, last
+        k += 1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def sfm_substep(
     b: int,  # which world copy of the batch to advance
     pos: NDArray[np.float64],  # (B, N, 2) [m], updated in place
@@ -219,18 +243,9 @@ def sfm_substep(
         py = pos[b, i, 1]
         if ready[i] > 0.0:
             # Waypoint bookkeeping: pass intermediate waypoints, stop at the final goal.
-            k = wp_index[b, i]
-            while True:
-                gx = waypoints[b, i, k, 0]
-                gy = waypoints[b, i, k, 1]
-                dg = norm2d(gx - px, gy - py)
-                last = k >= n_waypoints[b, i] - 1
-                if last:
-                    break
-                if dg < wp_tol:
-                    k += 1
-                else:
-                    break
+            k, gx, gy, dg, last = next_waypoint(
+                waypoints, b, i, n_waypoints[b, i], wp_index[b, i], px, py, wp_tol
+            )
             wp_index[b, i] = k
             if last and dg < goal_tol:
                 status[b, i] = ARRIVED

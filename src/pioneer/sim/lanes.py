@@ -35,7 +35,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pioneer.sim.geometry import closest_point_on_segment, norm2d, segment_segment_distance
-from pioneer.sim.humans import ARRIVED, EXP_CUTOFF, GONE, WALKING
+from pioneer.sim.humans import ARRIVED, EXP_CUTOFF, GONE, WALKING, next_waypoint
 from pioneer.sim.robot import integrate_unicycle
 
 __all__ = ["trajectory_kernel_lanes"]
@@ -298,19 +298,9 @@ def trajectory_kernel_lanes(
                     qx = px[i, ln]
                     qy = py[i, ln]
                     if ready[i, ln]:
-                        b = copy_of[ln]
-                        kk = wpi[i, ln]
-                        while True:
-                            tx = hwp[b, i, kk, 0]
-                            ty = hwp[b, i, kk, 1]
-                            dd = norm2d(tx - qx, ty - qy)
-                            last = kk >= nwp[i, ln] - 1
-                            if last:
-                                break
-                            if dd < wp_tol:
-                                kk += 1
-                            else:
-                                break
+                        kk, tx, ty, dd, last = next_waypoint(
+                            hwp, copy_of[ln], i, nwp[i, ln], wpi[i, ln], qx, qy, wp_tol
+                        )
                         wpi[i, ln] = kk
                         if last and dd < g_tol:
                             status[i, ln] = ARRIVED
