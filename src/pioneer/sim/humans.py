@@ -61,6 +61,7 @@ __all__ = [
     "WALKING",
     "SocialForceConfig",
     "next_waypoint",
+    "push_out_of_walls",
     "sfm_substep",
 ]
 
@@ -148,6 +149,37 @@ class SocialForceConfig(Config):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def push_out_of_walls(
+    px: float, py: float, vx: float, vy: float, r: float, walls: NDArray[np.float64]
+) -> tuple[float, float, float, float]:
+    """Hard walls: a body of radius ``r`` at ``(px, py)`` overlapping a wall is projected back
+    to contact and loses its velocity into the wall; a second pass only if the first one moved
+    it (corners). Returns the position [m] and velocity [m/s]."""
+    for _ in range(2):
+        moved = False
+        for w in range(walls.shape[0]):
+            cx, cy = closest_point_on_segment(
+                px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            )
+            dx = px - cx
+            dy = py - cy
+            d = norm2d(dx, dy)
+            if d < r and d > 1e-12:
+                nx = dx / d
+                ny = dy / d
+                px = cx + nx * r
+                py = cy + ny * r
+                moved = True
+                vn = vx * nx + vy * ny
+                if vn < 0.0:
+                    vx -= vn * nx
+                    vy -= vn * ny
+        if not moved:
+            break
+    return px, py, vx, vy
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def next_waypoint(
     waypoints: NDArray[np.float64],  # (B, N, W, 2) [m]
     b: int,
@@ -222,7 +254,6 @@ def sfm_substep(
     if abs(v_robot) < params[13]:
         a_r = params[12]  # a standing robot
     n = pos.shape[1]
-    m = walls.shape[0]
     m_pad = wall_tab.shape[1]
     if fx.shape[0] < n or fy.shape[0] < n or ready.shape[0] < n or wall_d.shape[0] < n:
         raise ValueError("sfm_substep: scratch arrays must have length >= N")
@@ -313,27 +344,7 @@ def sfm_substep(
         # Hard walls: project an overlapping body back to contact and drop its inward velocity
         # (skipped when the body was clear of every wall by more than its step).
         if wall_d[i] - norm2d(vx * h, vy * h) <= radius[b, i]:
-            for _ in range(2):  # a second pass only if the first one moved the body (corners)
-                moved = False
-                for w in range(m):
-                    cx, cy = closest_point_on_segment(
-                        px, py, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
-                    )
-                    dx = px - cx
-                    dy = py - cy
-                    d = norm2d(dx, dy)
-                    if d < radius[b, i] and d > 1e-12:
-                        nx = dx / d
-                        ny = dy / d
-                        px = cx + nx * radius[b, i]
-                        py = cy + ny * radius[b, i]
-                        moved = True
-                        vn = vx * nx + vy * ny
-                        if vn < 0.0:
-                            vx -= vn * nx
-                            vy -= vn * ny
-                if not moved:
-                    break
+            px, py, vx, vy = push_out_of_walls(px, py, vx, vy, radius[b, i], walls)
         pos[b, i, 0] = px
         pos[b, i, 1] = py
         vel[b, i, 0] = vx

@@ -34,8 +34,15 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pioneer.sim.geometry import closest_point_on_segment, norm2d, segment_segment_distance
-from pioneer.sim.humans import ARRIVED, EXP_CUTOFF, GONE, WALKING, next_waypoint
+from pioneer.sim.geometry import norm2d, segment_segment_distance
+from pioneer.sim.humans import (
+    ARRIVED,
+    EXP_CUTOFF,
+    GONE,
+    WALKING,
+    next_waypoint,
+    push_out_of_walls,
+)
 from pioneer.sim.robot import integrate_unicycle
 
 __all__ = ["trajectory_kernel_lanes"]
@@ -424,7 +431,9 @@ def trajectory_kernel_lanes(
                     if not walking[i, ln]:
                         continue
                     if push[i, ln]:
-                        _push_out(i, ln, px, py, vx, vy, rad, walls, m)
+                        px[i, ln], py[i, ln], vx[i, ln], vy[i, ln] = push_out_of_walls(
+                            px[i, ln], py[i, ln], vx[i, ln], vy[i, ln], rad[i, ln], walls
+                        )
                     qx = px[i, ln]
                     qy = py[i, ln]
                     if ready[i, ln] and norm2d(vx[i, ln], vy[i, ln]) < settle_v:
@@ -590,44 +599,6 @@ def _accumulate(
         mag = a * es[ln]
         ax[ln] = ax[ln] + mag * dxs[ln] / ds[ln] if ok[ln] else ax[ln]
         ay[ln] = ay[ln] + mag * dys[ln] / ds[ln] if ok[ln] else ay[ln]
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _push_out(
-    i: int, ln: int, px: F64, py: F64, vx: F64, vy: F64, rad: F64, walls: F64, m: int
-) -> None:
-    """The reference's hard walls for human ``i`` of lane ``ln``: project an overlapping body
-    back to contact and drop its velocity into the wall (two passes at most, for corners)."""
-    qx = px[i, ln]
-    qy = py[i, ln]
-    ux = vx[i, ln]
-    uy = vy[i, ln]
-    r = rad[i, ln]
-    for _ in range(2):
-        moved = False
-        for q in range(m):
-            cx, cy = closest_point_on_segment(
-                qx, qy, walls[q, 0], walls[q, 1], walls[q, 2], walls[q, 3]
-            )
-            dx = qx - cx
-            dy = qy - cy
-            d = norm2d(dx, dy)
-            if d < r and d > 1e-12:
-                nx = dx / d
-                ny = dy / d
-                qx = cx + nx * r
-                qy = cy + ny * r
-                moved = True
-                vn = ux * nx + uy * ny
-                if vn < 0.0:
-                    ux -= vn * nx
-                    uy -= vn * ny
-        if not moved:
-            break
-    px[i, ln] = qx
-    py[i, ln] = qy
-    vx[i, ln] = ux
-    vy[i, ln] = uy
 
 
 @njit(cache=True, error_model="numpy", inline="always")
