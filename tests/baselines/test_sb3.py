@@ -323,5 +323,13 @@ def test_the_shipped_policy_loads_without_weights(scenario):
     obs, info = env.reset(seed=0)
     policy.reset(info, np.random.default_rng(0))
     assert env.action_space.contains(policy.act(obs, info).astype(np.float32))
+    # it acts as SB3's own predict, bit for bit, along an episode
+    for _ in range(60):
+        a = policy.act(obs, info)
+        ref, _ = policy.policy.predict(obs, deterministic=True)  # type: ignore[attr-defined]
+        np.testing.assert_array_equal(a, ref.astype(np.float64))
+        obs, _, done, cut, info = env.step(a)
+        if done or cut:
+            break
     assert sb3_files(scenario, {}) == {"weights": shipped_sb3_weights(scenario)}
     assert sb3_files(scenario, {"weights": "mine.safetensors"}) == {}

@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from pioneer.bounds import Positive
@@ -34,7 +34,13 @@ from pioneer.config import Config
 from pioneer.sim.events import Event
 from pioneer.sim.world import State, World
 
-__all__ = ["CrowdNavReward", "CrowdNavRewardConfig", "crowdnav_reward", "crowdnav_reward_terms"]
+__all__ = [
+    "TERMS",
+    "CrowdNavReward",
+    "CrowdNavRewardConfig",
+    "crowdnav_reward",
+    "crowdnav_reward_terms",
+]
 
 F64 = NDArray[np.float64]
 
@@ -57,71 +63,107 @@ class CrowdNavRewardConfig(Config):
     reference_dt: Positive | None = 0.25
 
 
-class _Parts(NamedTuple):
-    event: NDArray[np.int8]
-    ongoing: NDArray[np.bool_]  # neither collided nor arrived in this step
-    close: NDArray[np.bool_]  # gap below the discomfort distance
-    base: F64  # discomfort or potential term
-    first: F64  # outcome reward, else ``base``
-    intrusion: F64
-    spin: F64
-    reverse: F64
-
-    @property
-    def total(self) -> F64:
-        return self.first + self.intrusion + self.spin + self.reverse
-
-
 _COLLISION, _SUCCESS = int(Event.COLLISION), int(Event.SUCCESS)  # plain ints: no enum lookup
-
-
-def _norm2(d: F64) -> F64:
-    """‖d‖ over the last axis of length 2: the same sum of squares as ``np.linalg.norm``
-    (bit for bit), without its per-call overhead."""
-    x, y = d[..., 0], d[..., 1]
-    out: F64 = np.sqrt(x * x + y * y)
-    return out
+# The rows of the terms the kernel fills, in the order of ``crowdnav_reward_terms``'s dict.
+TERMS = ("success", "collision", "discomfort", "progress", "intrusion", "spin", "reverse")
 
 
 @functools.lru_cache(maxsize=16)
-def _constants(rc: CrowdNavRewardConfig, dt: float) -> tuple[float, F64, F64]:
-    """Per config and Δt: the per-step factor Δt/T, the prediction times k·Δt_pred ``(K,)`` and
-    the intrusion penalties −20/2^(k+1) · Δt/T ``(K,)`` (computed once, not every step)."""
+def _constants(rc: CrowdNavRewardConfig, dt: float) -> tuple[F64, F64, F64]:
+    """Per config and Δt (computed once, not every step): the kernel's scalar parameters, the
+    prediction times k·Δt_pred ``(K,)`` and the intrusion penalties −20/2^(k+1) · Δt/T
+    ``(K,)``, with the per-step factor Δt/T."""
     per_step = dt / rc.reference_dt if rc.reference_dt else 1.0  # T → Δt for per-step terms
     k = np.arange(1, rc.n_pred + 1)
     ks: F64 = (k * rc.pred_dt).astype(np.float64)
     pen: F64 = (rc.intrusion / 2.0 ** (k + 1) * per_step).astype(np.float64)
-    ks.setflags(write=False)
-    pen.setflags(write=False)
-    return per_step, ks, pen
+    params: F64 = np.array(
+        [
+            rc.success, rc.collision, rc.discomfort_distance, rc.discomfort_scale, rc.potential,
+            rc.spin, rc.reverse, dt, per_step,
+        ]
+    )  # fmt: skip
+    for a in (params, ks, pen):
+        a.setflags(write=False)
+    return params, ks, pen
 
 
-def _parts(
+@njit(cache=True)
+def _terms_kernel(
+    out: F64,  # (8, B): the TERMS rows, then the total
+    prev_goal: F64,  # (B, 2)
+    prev_robot: F64,  # (B, 3)
+    goal: F64,  # (B, 2)
+    robot: F64,  # (B, 3)
+    gap: F64,  # (B,)
+    event: NDArray[np.int8],  # (B,)
+    h_pos: F64,  # (B, N, 2)
+    h_vel: F64,  # (B, N, 2)
+    h_radius: F64,  # (B, N)
+    present: NDArray[np.bool_],  # (B, N)
+    command: F64,  # (B, 2)
+    ks: F64,  # (K,) prediction times [s]
+    pen: F64,  # (K,) intrusion penalties
+    params: F64,  # success, collision, d_disc, disc_scale, potential, spin, reverse, dt, per_step
+    r_robot: float,
+) -> None:  # pragma: no cover - compiled
+    """Every term of every copy, with the arithmetic of the formulas in the module docstring
+    in the order NumPy evaluated them before this kernel (no fastmath: the same values bit
+    for bit; the tests compare against that NumPy reference)."""
+    success, collision, d_disc = params[0], params[1], params[2]
+    scale, potential = params[3], params[4]
+    spin_w, reverse, dt, per_step = params[5], params[6], params[7], params[8]
+    n_b, n_h = h_pos.shape[0], h_pos.shape[1]
+    for b in range(n_b):
+        x0 = prev_goal[b, 0] - prev_robot[b, 0]
+        y0 = prev_goal[b, 1] - prev_robot[b, 1]
+        x1 = goal[b, 0] - robot[b, 0]
+        y1 = goal[b, 1] - robot[b, 1]
+        d0 = np.sqrt(x0 * x0 + y0 * y0)
+        d1 = np.sqrt(x1 * x1 + y1 * y1)
+        c = gap[b]
+        close = c < d_disc
+        collided = event[b] == _COLLISION
+        reached = event[b] == _SUCCESS
+        ongoing = not (collided or reached)
+        base = (c - d_disc) * scale * dt if close else potential * (d0 - d1)
+        first = collision if collided else (success if reached else base)
+        intr = 0.0
+        if ongoing and n_h > 0:  # the least of pen_k (hit) or 0 (missed) over humans and k
+            intr = np.inf
+            for i in range(n_h):
+                reach = r_robot + h_radius[b, i]
+                for k in range(ks.shape[0]):
+                    dx = (h_pos[b, i, 0] + h_vel[b, i, 0] * ks[k]) - robot[b, 0]
+                    dy = (h_pos[b, i, 1] + h_vel[b, i, 1] * ks[k]) - robot[b, 1]
+                    hit = present[b, i] and np.sqrt(dx * dx + dy * dy) < reach
+                    intr = min(intr, pen[k] if hit else 0.0)
+        w = command[b, 1] * dt
+        spin = spin_w * (w * w) / per_step
+        v = command[b, 0]
+        rev = reverse * per_step * np.abs(v) if v < 0.0 else 0.0
+        out[0, b] = success if reached else 0.0
+        out[1, b] = collision if collided else 0.0
+        out[2, b] = base if ongoing and close else 0.0
+        out[3, b] = base if ongoing and not close else 0.0
+        out[4, b] = intr
+        out[5, b] = spin
+        out[6, b] = rev
+        out[7, b] = first + intr + spin + rev
+
+
+def _terms(
     world: World, prev: State, new: State, event: NDArray[np.int8], rc: CrowdNavRewardConfig
-) -> _Parts:
+) -> F64:
+    """The ``(8, B)`` table of :func:`_terms_kernel`: the :data:`TERMS` rows, then the total."""
     sim = world.sim
-    dt = sim.dt
-    per_step, ks, pen = _constants(rc, dt)
-    collided, reached = event == _COLLISION, event == _SUCCESS
-    d0 = _norm2(prev.goal - prev.robot[:, :2])
-    d1 = _norm2(new.goal - new.robot[:, :2])
-    c = new.gap
-    close = c < rc.discomfort_distance
-    ongoing = ~(collided | reached)
-    base = np.where(
-        close, (c - rc.discomfort_distance) * rc.discomfort_scale * dt, rc.potential * (d0 - d1)
-    )
-    first = np.where(collided, rc.collision, np.where(reached, rc.success, base))
-    intr = np.zeros(new.batch_size)
-    if new.n_humans:
-        pred = new.h_pos[:, :, None, :] + new.h_vel[:, :, None, :] * ks[None, None, :, None]
-        dist = _norm2(pred - new.robot[:, None, None, :2])  # (B, N, K)
-        hit = (dist < sim.robot.radius + new.h_radius[:, :, None]) & new.humans_present[..., None]
-        intr = np.where(ongoing, np.where(hit, pen[None, None, :], 0.0).min(axis=(1, 2)), 0.0)
-    v, w = new.command[:, 0], new.command[:, 1]
-    spin = rc.spin * (w * dt) ** 2 / per_step
-    rev = np.where(v < 0.0, rc.reverse * per_step * np.abs(v), 0.0)
-    return _Parts(event, ongoing, close, base, first, intr, spin, rev)
+    params, ks, pen = _constants(rc, sim.dt)
+    out = np.empty((len(TERMS) + 1, new.batch_size))
+    _terms_kernel(
+        out, prev.goal, prev.robot, new.goal, new.robot, new.gap, event, new.h_pos, new.h_vel,
+        new.h_radius, new.humans_present, new.command, ks, pen, params, float(sim.robot.radius),
+    )  # fmt: skip
+    return out
 
 
 def crowdnav_reward_terms(
@@ -134,18 +176,8 @@ def crowdnav_reward_terms(
     """Per-term rewards ``{name: (B,)}`` and their total ``(B,)`` of the step ``prev → new``
     whose event codes ``(B,)`` the world gave (:func:`pioneer.sim.events.classify`): the
     reward prices an ending, it does not decide it."""
-    rc = config
-    p = _parts(world, prev, new, event, rc)
-    terms = {
-        "success": np.where(p.event == _SUCCESS, rc.success, 0.0),
-        "collision": np.where(p.event == _COLLISION, rc.collision, 0.0),
-        "discomfort": np.where(p.ongoing & p.close, p.base, 0.0),
-        "progress": np.where(p.ongoing & ~p.close, p.base, 0.0),
-        "intrusion": p.intrusion,
-        "spin": p.spin,
-        "reverse": p.reverse,
-    }
-    return terms, p.total
+    out = _terms(world, prev, new, event, config)
+    return dict(zip(TERMS, out, strict=False)), out[-1]
 
 
 def crowdnav_reward(
@@ -157,7 +189,7 @@ def crowdnav_reward(
 ) -> F64:
     """Total reward ``(B,)`` of the step ``prev → new`` with the world's event codes (without
     the per-term breakdown: the trainer's hot path)."""
-    return _parts(world, prev, new, event, config).total
+    return _terms(world, prev, new, event, config)[-1]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
+from pioneer.baselines.crowdnav.inference import CrowdNavInference
 from pioneer.baselines.crowdnav.network import CrowdNavNet, load_crowdnav
 from pioneer.baselines.crowdnav.observation import (
     build_observation,
@@ -21,7 +22,12 @@ from pioneer.data import shipped_crowdnav_weights
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.world import State, World
 
-__all__ = ["CrowdNavPolicy", "make_crowdnav_policy"]
+__all__ = ["FORWARD", "CrowdNavPolicy", "Forward", "make_crowdnav_policy"]
+
+# Who computes the network's acting step: "numpy" (CrowdNavInference, ≈ 5× faster at a batch
+# of one) or "torch" (the module itself, the reference; equal to float32 rounding).
+Forward = Literal["numpy", "torch"]
+FORWARD: Forward = "numpy"
 
 
 # ------------------------------------------------------------------------------ policy
@@ -30,18 +36,25 @@ class CrowdNavPolicy:
 
     ``reset`` zeroes the GRU state; ``act`` builds the graph observation, advances the GRU one
     step and integrates the mean increments on the last command. ``attention`` holds the last
-    robot–human weights over the sorted, present humans.
+    robot–human weights over the sorted, present humans. ``forward``: who computes the
+    network's step (:data:`Forward`).
     """
 
-    def __init__(self, model: CrowdNavNet, name: str = "crowdnav++") -> None:
+    def __init__(self, model: CrowdNavNet, name: str = "crowdnav++", forward: Forward = FORWARD):
+        if forward not in ("numpy", "torch"):
+            raise ConfigError(
+                expect("crowdnav++ forward", "'numpy' or 'torch'", forward, "pick one")
+            )
         self.model = model.eval()
         self.name = name
-        self.h = model.initial_state(1)
+        self.forward = forward
+        self._numpy = CrowdNavInference(model) if forward == "numpy" else None
+        self.h = np.zeros((1, model.config.hidden), dtype=np.float32)  # the GRU state
         self.attention: NDArray[np.float32] = np.zeros(0, dtype=np.float32)
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Start an episode: GRU state to zero (the policy is deterministic; ``rng`` unused)."""
-        self.h = self.model.initial_state(1)
+        self.h = np.zeros_like(self.h)
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         """The command ``(v [m/s], ω [rad/s])``, shape ``(2,)``."""
@@ -56,13 +69,17 @@ class CrowdNavPolicy:
                 )
             )
         o = build_observation(state, world, self.model.config)
-        with torch.inference_mode():
-            x, a_rh, _ = self.model.encode(*obs_tensors(o))
-            self.h = self.model.gru(x, self.h)
-            mean, _ = self.model.heads(self.h)
-        self.attention = a_rh[0].numpy()[o.mask[0]]
+        if self._numpy is not None:
+            mean, a_rh, self.h = self._numpy.step(o, self.h)
+        else:
+            with torch.inference_mode():
+                x, a, _ = self.model.encode(*obs_tensors(o))
+                h = self.model.gru(x, torch.from_numpy(self.h))
+                m, _ = self.model.heads(h)
+            mean, a_rh, self.h = m.numpy(), a.numpy(), h.numpy()
+        self.attention = a_rh[0][o.mask[0]]
         cmd = command_from_action(
-            mean.numpy(), state.command[:, 0], world.sim.robot, world.sim.dt, self.model.config
+            mean, state.command[:, 0], world.sim.robot, world.sim.dt, self.model.config
         )
         return cmd[0]
 
@@ -73,6 +90,7 @@ def make_crowdnav_policy(
     name: str = "crowdnav++",
     torch_threads: Annotated[int, Ge(1)] | None = 1,
     variant: str = "ppo",
+    forward: Forward = FORWARD,
 ) -> CrowdNavPolicy:
     """Policy factory: ``weights`` (``{scenario}`` filled in) or the shipped file for ``scenario``
     (``variant`` "ppo": pure PPO, the ``crowdnav++`` row; "il": imitation warm start + PPO, the
@@ -80,6 +98,8 @@ def make_crowdnav_policy(
 
     ``torch_threads`` sets torch's intra-op threads of this process (1: a batch-1 step gains
     nothing from threads and evaluation runs one worker per core); ``None`` leaves it.
+    ``forward``: the network's acting step in NumPy (the default) or in torch, the reference
+    (:mod:`pioneer.baselines.crowdnav.inference`).
     """
     if weights is None:
         if scenario is None:
@@ -91,4 +111,4 @@ def make_crowdnav_policy(
         path = Path(str(weights).format(scenario=scenario) if scenario else str(weights))
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
-    return CrowdNavPolicy(load_crowdnav(path), name=name)
+    return CrowdNavPolicy(load_crowdnav(path), name=name, forward=forward)
