@@ -135,3 +135,27 @@ def test_lanes_without_people_or_walls():
                 advance(world, s0, u, dt=0.3, n_steps=6, stop_at_collision=stop),
                 advance(world, s0, u, dt=0.3, n_steps=6, stop_at_collision=stop, lanes=True),
             )
+
+
+@pytest.mark.parametrize("lanes", [False, True])
+def test_in_place_advances_the_given_state_itself(lanes):
+    """``in_place`` skips the copy: the trace's final state is the argument, advanced to the
+    values a copying call gives; the copying call leaves its argument alone."""
+    world, s0, u = _copies("hr-rl", 4, 9)
+    before = s0.copy()
+    copied = advance(world, s0, u, dt=0.3, n_steps=10, stop_at_collision=True, lanes=lanes)
+    assert states_equal(s0, before)
+    mine = s0.copy()
+    owned = advance(
+        world, mine, u, dt=0.3, n_steps=10, stop_at_collision=True, lanes=lanes, in_place=True
+    )
+    assert owned.final is mine
+    _assert_same(copied, owned)
+
+
+def test_repeat_gives_independent_copies():
+    _, s0, _ = _copies("hr-rl", 5, 1)
+    r = s0.repeat(4)
+    assert r.batch_size == 4 and states_equal(r.take(2), s0)
+    r.h_pos[1] += 1.0
+    assert states_equal(r.take(0), s0) and not states_equal(r.take(1), s0)

@@ -139,7 +139,7 @@ def rollout(
     if human_model == "privileged":
         tr = advance(
             world, s, commands, dt, n_steps, stop_at_collision=True, lanes=True,
-            vector_exp=precision == "fast",
+            vector_exp=precision == "fast", in_place=True,
         )  # fmt: skip
         hit = tr.final.collided
         return Rollout(

@@ -185,7 +185,12 @@ class State:
             raise ConfigError(
                 expect("State.repeat", "a state with B = 1", self.batch_size, "take(i)")
             )
-        return State(**{k: np.repeat(v, n, axis=0) for k, v in self._arrays().items()})
+        new = object.__new__(State)  # as in ``copy``: without the frozen __init__'s cost
+        fields = new.__dict__
+        mine = self.__dict__
+        for k in _STATE_FIELDS:
+            fields[k] = mine[k].repeat(n, axis=0)
+        return new
 
     @staticmethod
     def concat(states: Sequence[State]) -> State:
@@ -305,6 +310,7 @@ def advance(
     stop_at_collision: bool = False,
     lanes: bool = False,
     vector_exp: bool = False,
+    in_place: bool = False,
 ) -> WorldTrace:
     """``n_steps`` calls of :func:`step` with the commands ``(B, 2)`` held, in one kernel call,
     recording every step (bit for bit the values of the repeated ``step``; tested).
@@ -314,6 +320,8 @@ def advance(
     With ``lanes`` the copies run in SIMD lanes (:mod:`pioneer.sim.lanes`): the same values, bit
     for bit, faster for many copies; with ``vector_exp`` too, its social forces take e^z from
     ``lanes.exp_lanes`` (within 2 ulp of ``math.exp``): faster still, no longer bit for bit.
+    With ``in_place`` the trace's final state is ``state`` itself, advanced (for a caller that
+    made ``state`` for this call alone, as a planner's repeated copies: no copy is made).
     """
     if vector_exp and not lanes:
         raise ConfigError(
@@ -324,7 +332,7 @@ def advance(
     if n_steps < 1:
         raise ConfigError(expect("advance n_steps", ">= 1", n_steps, "pass at least 1"))
     u = validate_command(command, state.batch_size)
-    new = state.copy()
+    new = state if in_place else state.copy()
     n_sub = max(1, math.ceil(h_dt / world.sim.social_force.max_substep - 1e-9))
     n_b, n_h = state.batch_size, state.n_humans
     poses = np.empty((n_b, n_steps, 3))
