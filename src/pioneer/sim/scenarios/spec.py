@@ -117,8 +117,7 @@ class ScenarioConfig(Config):
         walls = np.asarray(self.walls, dtype=np.float64).reshape(-1, 4)
         rng = np.random.default_rng(0)
         for i, h in enumerate(self.humans):
-            pts = [h.start.center] + [h.start.sample(rng) for _ in range(256)]
-            if not any(_wall_distance(p, walls) >= h.radius + self.min_start_gap for p in pts):
+            if not _fits(h.start, walls, h.radius + self.min_start_gap, rng):
                 raise ScenarioError(
                     expect(
                         f"{self.name}: humans[{i}].start ({h.role})",
@@ -128,8 +127,7 @@ class ScenarioConfig(Config):
                     )
                 )
         r_r = self.sim.robot.radius
-        pts = [self.robot_start.center] + [self.robot_start.sample(rng) for _ in range(256)]
-        if not any(_wall_distance(p, walls) >= r_r + self.min_start_gap for p in pts):
+        if not _fits(self.robot_start, walls, r_r + self.min_start_gap, rng):
             raise ScenarioError(
                 expect(
                     f"{self.name}: robot_start",
@@ -146,6 +144,15 @@ class ScenarioConfig(Config):
             bounds=np.asarray(self.bounds),
             sim=self.sim,
         )
+
+
+def _fits(region: Region, walls: np.ndarray, clearance: float, rng: np.random.Generator) -> bool:
+    """Whether some point of ``region`` — its centre, else one of 256 drawn from ``rng`` — is
+    ``clearance`` clear of every wall. The points are drawn only when needed: the centre
+    usually fits, and a scenario is built for every episode."""
+    if _wall_distance(np.asarray(region.center), walls) >= clearance:
+        return True
+    return any(_wall_distance(region.sample(rng), walls) >= clearance for _ in range(256))
 
 
 def _wall_distance(p: np.ndarray, walls: np.ndarray) -> float:
