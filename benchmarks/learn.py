@@ -44,9 +44,10 @@ def scan_360(seed: int) -> tuple[np.ndarray, float, float, float]:
 
 def bench_student_decision(plan: Plan) -> Result:
     """Student decision (batch 1): scan → command through ONNX Runtime (the deploy runtime,
-    resampling included), observation → command through PyTorch (uncertainty included), and
-    the teacher's decision timed apart, for the teacher/student ratio. Weights do not change
-    the cost, so a freshly initialised MDN of the paper's architecture is timed."""
+    resampling included), observation → command through the policy's NumPy forward (the
+    default) and through PyTorch (the reference; uncertainty included in both), and the
+    teacher's decision timed apart, for the teacher/student ratio. Weights do not change the
+    cost, so a freshly initialised MDN of the paper's architecture is timed."""
     import torch
 
     from pioneer.control.teacher import make_teacher
@@ -56,7 +57,8 @@ def bench_student_decision(plan: Plan) -> Result:
 
     torch.set_num_threads(1)
     model = build_student(seed=SEED + 50)
-    policy = StudentPolicy(model)
+    policy = StudentPolicy(model, forward="numpy")
+    reference = StudentPolicy(model, forward="torch")
     _, world, state = elevator_setup(SEED + 51)
     obs = observe(world, state)[0]
     teacher = make_teacher(SCENARIO)
@@ -68,21 +70,24 @@ def bench_student_decision(plan: Plan) -> Result:
         # states flush the caches, which would time a cold student, not a 10 Hz loop's).
         cases = {
             "onnx_scan": Case(lambda _: runtime.step(ranges, amin, inc, rmax, goal, age_s=0.05)),
-            "torch_obs": Case(lambda _: policy.act(obs, {})),
+            "numpy_obs": Case(lambda _: policy.act(obs, {})),
+            "torch_obs": Case(lambda _: reference.act(obs, {})),
         }
         secs = time_cases(cases, 10 * plan.batch_repeats, warmup=20)
         secs["teacher"] = time_cases(
             {"teacher": Case(lambda _: teacher.decide(world, state))}, plan.batch_repeats, 3
         )["teacher"]
-    onnx_ms, torch_ms, teacher_ms = (
-        float(np.median(secs[k])) * 1e3 for k in ("onnx_scan", "torch_obs", "teacher")
+    onnx_ms, numpy_ms, torch_ms, teacher_ms = (
+        float(np.median(secs[k])) * 1e3 for k in ("onnx_scan", "numpy_obs", "torch_obs", "teacher")
     )
     return {
         "metrics": {
             "ms_onnx_scan_to_command": metric(secs["onnx_scan"] * 1e3, "ms", ("<=", 0.2)),
+            "ms_numpy_obs_to_command": metric(secs["numpy_obs"] * 1e3, "ms", ("<=", 1.0)),
             "ms_torch_obs_to_command": metric(secs["torch_obs"] * 1e3, "ms", ("<=", 1.0)),
             "ms_teacher_decision": metric(secs["teacher"] * 1e3, "ms"),
             "teacher_over_student_onnx": metric([teacher_ms / onnx_ms], "x"),
+            "teacher_over_student_numpy": metric([teacher_ms / numpy_ms], "x"),
             "teacher_over_student_torch": metric([teacher_ms / torch_ms], "x"),
         },
         "info": {"scan_beams": 360, "threads": 1, "model": "MDN 29-128-128-K10"},
@@ -191,17 +196,20 @@ def bench_dagger_run(plan: Plan) -> Result:
 
 def bench_crowdnav_decision(plan: Plan) -> Result:
     """CrowdNav++ ``policy.act`` (graph observation from the privileged state, attention, GRU
-    step, increments → command) over the states of seeded HR-RL episodes, shipped weights,
-    one torch thread."""
+    step, increments → command) over the states of seeded HR-RL episodes, shipped weights:
+    the NumPy forward (the default) and the module's (``forward="torch"``, one torch thread)."""
     from pioneer.control.registry import build_policy
 
     policy = build_policy("crowdnav++", SCENARIO)  # sets torch to 1 thread
+    reference = build_policy("crowdnav++", SCENARIO, forward="torch")
     # the same episode count as CVaR-BF's benchmark
     secs = episode_decision_times(lambda _: policy, plan.cvar_episodes, SEED + 70, warmup=5)
+    ref = episode_decision_times(lambda _: reference, plan.cvar_episodes, SEED + 70, warmup=5)
     return {
         "metrics": {
             "ms_decision": metric(secs * 1e3, "ms", ("<=", 1.0)),
             "ms_decision_p90": metric([float(np.percentile(secs, 90) * 1e3)], "ms"),
+            "ms_decision_torch": metric(ref * 1e3, "ms"),
         },
         "info": {"decisions": int(secs.size), "episodes": plan.cvar_episodes, "threads": 1},
     }

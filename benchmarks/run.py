@@ -29,7 +29,7 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``teacher_equivalence`` float32 vs float64 rays over ≈ 2,300 teacher states: the
                           same candidate in >= 99 %, score loss elsewhere < 0.05
 - ``student_decision``    student scan → command via ONNX Runtime              <= 0.2 ms
-                          obs → command via PyTorch                            <= 1 ms
+                          obs → command via NumPy (the default) and PyTorch    <= 1 ms
                           and the teacher/student decision-time ratio
 - ``deploy_memory``       peak RSS of the torch-free deploy runtime, 1,000 scans < 200 MB
 - ``memory``              peak RSS of a fresh process doing 1,000 env steps     < 300 MB
@@ -38,7 +38,8 @@ Benchmarks and targets (docs/performance.md explains them):
                           speed-ups and the Amdahl serial fraction, opt-in via --only
 - ``cvar_bf_decision``    CVaR-BF over 4 seeded HR-RL episodes                <= 4 ms, p90 <= 8 ms
                           and its ratio to the host probe's GEMM (256³ float32) <= 19
-- ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights, 1 thread      <= 1 ms
+- ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights (NumPy; torch  <= 1 ms
+                          beside it, 1 thread)
 - ``crowdnav_train_throughput``  PPO trainer env steps/s, 16 and 32 envs       >= 2,000 /s (32)
 - ``vector_env``          64 envs: native vector env vs ``SyncVectorEnv``      native >= 5x sync
 """
