@@ -136,3 +136,27 @@ def test_classify_counts_only_this_step_and_collision_wins() -> None:
     assert codes.tolist() == [Event.COLLISION, Event.NONE, Event.SUCCESS, Event.NONE]
     new.t[:] = 1e9
     assert classify(prev, new, time_limit=1e9).tolist()[3] == Event.TIMEOUT
+
+
+def test_classify_equals_its_rule_on_every_combination() -> None:
+    """Against the rule written with array operators (the oracle): every combination of
+    collided / arrived before and after the step, and times around the limit."""
+    cfg = get_scenario("static")
+    base = sample_state(cfg, np.random.default_rng(0))
+    flags = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], [0, 1], [0, 1, 2])).reshape(5, -1)
+    n = flags.shape[1]
+    prev, new = base.repeat(n), base.repeat(n)
+    prev.collided[:], prev.reached[:] = flags[0] == 1, flags[1] == 1
+    new.collided[:], new.reached[:] = flags[2] == 1, flags[3] == 1
+    limit = 30.0
+    new.t[:] = np.array([29.9, limit - 1e-10, 30.1])[flags[4]]
+    collided = new.collided & ~prev.collided
+    reached = new.reached & ~prev.reached & ~collided
+    timeout = ~(collided | reached) & (new.t >= limit - 1e-9)
+    want = np.where(
+        collided, Event.COLLISION, np.where(reached, Event.SUCCESS, np.where(timeout, 3, 0))
+    )
+    got = classify(prev, new, limit)
+    assert got.dtype == np.int8
+    np.testing.assert_array_equal(got, want)
+    assert set(got.tolist()) == {0, 1, 2, 3}
