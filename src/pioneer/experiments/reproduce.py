@@ -510,15 +510,27 @@ def _social_figures(
     from pioneer.viz.social import plot_clearance_distribution, plot_occupancy
 
     clear: dict[str, dict[str, list[float]]] = {sc: {} for sc in SCENARIOS}
-    where: dict[str, dict[str, list[list[float]]]] = {sc: {} for sc in SCENARIOS}
+    # every step's robot x and y, kept as two flat lists (pairs of 3 M steps cost seconds)
+    steps: dict[str, dict[str, tuple[list[float], list[float]]]] = {sc: {} for sc in SCENARIOS}
     for r in records:
         series = r.get("series")
         if r["scenario"] not in clear or not isinstance(series, Mapping):
             continue
         c = clear[r["scenario"]].setdefault(r["policy"], [])
         c.extend(x for x in series["clearance"] if x is not None)
-        xy = where[r["scenario"]].setdefault(r["policy"], [])
-        xy.extend([x, y] for x, y in zip(series["x"], series["y"], strict=True))
+        if len(series["x"]) != len(series["y"]):
+            raise DataError(
+                expect(
+                    f"a {r['policy']} record's series",
+                    "x and y of equal length",
+                    (len(series["x"]), len(series["y"])),
+                    "delete the record's line (its episode runs again) or use a new --out",
+                )
+            )
+        xs, ys = steps[r["scenario"]].setdefault(r["policy"], ([], []))
+        xs.extend(series["x"])
+        ys.extend(series["y"])
+    where = {sc: {pol: np.column_stack(xy) for pol, xy in by.items()} for sc, by in steps.items()}
 
     def ordered(d: Mapping[str, Any]) -> dict[str, Any]:
         return {row: d[row] for row in rows if row in d}
