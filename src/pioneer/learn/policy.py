@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 import torch
@@ -28,13 +28,9 @@ from pioneer.deploy.runtime import InputMemory
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.inference import StudentInference
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
+from pioneer.nn.forward import FORWARD, Forward, check_forward
 
-__all__ = ["FORWARD", "Forward", "StudentPolicy", "make_student_policy"]
-
-# Who computes the student's step: "numpy" (StudentInference, ≈ 4× faster at a batch of one)
-# or "torch" (the module itself, the reference; equal to float32 rounding).
-Forward = Literal["numpy", "torch"]
-FORWARD: Forward = "numpy"
+__all__ = ["StudentPolicy", "make_student_policy"]
 
 
 class StudentPolicy:
@@ -46,7 +42,7 @@ class StudentPolicy:
     ``reset`` clears it. A student that also reads o_{t−1} or u_{t−1}
     (:class:`~pioneer.deploy.runtime.StudentInputs`) remembers them as the ONNX runtime does:
     the observation it decided on and the command it sent, clipped to the robot's limits.
-    ``forward``: who computes the network's step (:data:`Forward`).
+    ``forward``: who computes the network's step (:mod:`pioneer.nn.forward`).
     """
 
     def __init__(
@@ -56,8 +52,7 @@ class StudentPolicy:
         action_mode: str | None = None,
         forward: Forward = FORWARD,
     ) -> None:
-        if forward not in ("numpy", "torch"):
-            raise ConfigError(expect("student forward", "'numpy' or 'torch'", forward, "pick one"))
+        check_forward("student", forward)
         self.model = model.eval()
         self.forward = forward
         self._numpy = StudentInference(self.model) if forward == "numpy" else None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 import torch
@@ -20,14 +20,10 @@ from pioneer.baselines.crowdnav.observation import (
 )
 from pioneer.data import shipped_crowdnav_weights
 from pioneer.errors import ConfigError, expect
+from pioneer.nn.forward import FORWARD, Forward, check_forward
 from pioneer.sim.world import State, World
 
-__all__ = ["FORWARD", "CrowdNavPolicy", "Forward", "make_crowdnav_policy"]
-
-# Who computes the network's acting step: "numpy" (CrowdNavInference, ≈ 5× faster at a batch
-# of one) or "torch" (the module itself, the reference; equal to float32 rounding).
-Forward = Literal["numpy", "torch"]
-FORWARD: Forward = "numpy"
+__all__ = ["CrowdNavPolicy", "make_crowdnav_policy"]
 
 
 # ------------------------------------------------------------------------------ policy
@@ -37,14 +33,11 @@ class CrowdNavPolicy:
     ``reset`` zeroes the GRU state; ``act`` builds the graph observation, advances the GRU one
     step and integrates the mean increments on the last command. ``attention`` holds the last
     robot–human weights over the sorted, present humans. ``forward``: who computes the
-    network's step (:data:`Forward`).
+    network's step (:mod:`pioneer.nn.forward`).
     """
 
     def __init__(self, model: CrowdNavNet, name: str = "crowdnav++", forward: Forward = FORWARD):
-        if forward not in ("numpy", "torch"):
-            raise ConfigError(
-                expect("crowdnav++ forward", "'numpy' or 'torch'", forward, "pick one")
-            )
+        check_forward("crowdnav++", forward)
         self.model = model.eval()
         self.name = name
         self.forward = forward
