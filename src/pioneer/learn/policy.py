@@ -1,4 +1,4 @@
-"""Students as policies: the torch student and the registry entries (paper §IV-B).
+"""Students as policies: a trained student's checkpoint and the registry entries (paper §IV-B).
 
 Registered names (importing :mod:`pioneer.learn` registers them):
 
@@ -34,7 +34,8 @@ __all__ = ["StudentPolicy", "make_student_policy"]
 
 
 class StudentPolicy:
-    """A trained student acting from the 29-D observation (PyTorch, eval mode, batch 1).
+    """A trained student acting from the 29-D observation (batch 1; the network's step in
+    NumPy by default, or the PyTorch module in eval mode: ``forward``).
 
     ``act`` returns the deterministic action (MDN: mean of the most probable component, or
     the mixture mean with ``action_mode="mean"``). ``uncertainty`` holds ``(aleatoric,
