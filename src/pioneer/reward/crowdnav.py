@@ -129,7 +129,7 @@ def _terms_kernel(
         base = (c - d_disc) * scale * dt if close else potential * (d0 - d1)
         first = collision if collided else (success if reached else base)
         intr = 0.0
-        if ongoing and n_h > 0:  # the least of pen_k (hit) or 0 (missed) over humans and k
+        if ongoing and n_h > 0 and ks.shape[0] > 0:  # the least of pen_k (hit) or 0 (missed)
             intr = np.inf
             for i in range(n_h):
                 reach = r_robot + h_radius[b, i]
