@@ -1,9 +1,10 @@
 """CrowdNav++'s acting step in NumPy: the network of :class:`CrowdNavNet` for one decision.
 
 An evaluation episode asks the network for one action per 0.1 s step of one world — a batch
-of one. There PyTorch spends its time dispatching ≈ 60 operators on 64-wide arrays (≈ 0.6 ms
-a step), not computing; the same arithmetic as NumPy calls on float32 arrays takes a fraction
-of it. The weights are copied once from the module (transposed for row-vector products).
+of one. There PyTorch spends its time dispatching ≈ 60 operators on 64-wide arrays (most of
+a 0.5 ms decision), not computing; the same arithmetic as NumPy calls on float32 arrays takes
+a fraction of it (a decision 0.17 ms, docs/baselines.md). The weights are copied once from
+the module (transposed for row-vector products).
 
 The values equal the module's to float32 rounding, not bit for bit: the products, e^x and
 tanh come from other libraries (OpenBLAS and NumPy's SIMD loops instead of PyTorch's), so
