@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -185,12 +185,7 @@ class State:
             raise ConfigError(
                 expect("State.repeat", "a state with B = 1", self.batch_size, "take(i)")
             )
-        new = object.__new__(State)  # as in ``copy``: without the frozen __init__'s cost
-        fields = new.__dict__
-        mine = self.__dict__
-        for k in _STATE_FIELDS:
-            fields[k] = mine[k].repeat(n, axis=0)
-        return new
+        return self._each(lambda a: a.repeat(n, axis=0))
 
     @staticmethod
     def concat(states: Sequence[State]) -> State:
@@ -212,16 +207,18 @@ class State:
         return State(**{k: v[idx].copy() for k, v in self._arrays().items()})
 
     def copy(self) -> State:
-        """A deep copy (states are treated as values; the kernels work on copies).
+        """A deep copy (states are treated as values; the kernels work on copies)."""
+        return self._each(np.ndarray.copy)
 
-        Built without ``__init__``: the frozen dataclass's per-field ``object.__setattr__``
-        cost as much as copying the arrays, and ``step`` copies a state on every call.
-        """
+    def _each(self, fn: Callable[[NDArray[Any]], NDArray[Any]]) -> State:
+        """A new state whose every array is ``fn`` of this one's. Built without ``__init__``:
+        the frozen dataclass's per-field ``object.__setattr__`` cost as much as copying the
+        arrays, and ``step`` copies a state on every call (the planner repeats one too)."""
         new = object.__new__(State)
         fields = new.__dict__
         mine = self.__dict__
         for k in _STATE_FIELDS:
-            fields[k] = mine[k].copy()
+            fields[k] = fn(mine[k])
         return new
 
     def _arrays(self) -> dict[str, Any]:
