@@ -11,7 +11,13 @@ import pytest
 
 from pioneer.control.registry import build_policy, policy_names
 from pioneer.control.rollout import rollout
-from pioneer.control.teacher import LookaheadTeacher, SoftMargins, TeacherConfig, make_teacher
+from pioneer.control.teacher import (
+    Assumptions,
+    LookaheadTeacher,
+    SoftMargins,
+    TeacherConfig,
+    make_teacher,
+)
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
@@ -324,6 +330,57 @@ def test_make_teacher_passes_its_soft_margins():
     assert t.config.margins == SoftMargins(human=0.1, wall=0.05)
     with pytest.raises(ConfigError, match="human"):
         SoftMargins(human=-0.1)
+
+
+def test_assumptions_the_world_already_holds_change_no_decision():
+    # the paper world's people are 0.6 m and all react with A_r = 0.5: assuming exactly that
+    # is the ordinary teacher, command for command
+    world = get_scenario("hr-rl").sim.social_force
+    assert world.a_robot == 0.5
+    plain = make_teacher("hr-rl", density=False)
+    assuming = make_teacher("hr-rl", density=False, assume_radius=0.6, assume_a_robot=0.5)
+    assert assuming.config.assume.active
+    a, _ = run_episode("hr-rl", plain, 4)
+    b, _ = run_episode("hr-rl", assuming, 4)
+    assert a.event == b.event and a.steps == b.steps and a.path_length_m == b.path_length_m
+
+
+def test_assumptions_decide_as_the_teacher_of_the_assumed_world():
+    # oracle: assuming (r >= 0.75 m, everyone reacting with A_r = 1.5) decides exactly as the
+    # plain teacher does in a world and state that are so
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=2)
+    for _ in range(25):
+        _, _, _, _, info = env.step([0.3, 0.0])
+    world, state = info["world"], info["state"]
+    state = dataclasses.replace(state, h_reacts=np.zeros_like(state.h_reacts))  # nobody reacts
+    sim = world.sim
+    force = dataclasses.replace(sim.social_force, a_robot=1.5)
+    assumed_world = type(world)(
+        world.walls, world.bounds, dataclasses.replace(sim, social_force=force)
+    )
+    assumed_state = dataclasses.replace(
+        state, h_radius=np.maximum(state.h_radius, 0.75), h_reacts=np.ones_like(state.h_reacts)
+    )
+    assuming = make_teacher("hr-rl", density=False, assume_radius=0.75, assume_a_robot=1.5)
+    plain = make_teacher("hr-rl", density=False)
+    got = assuming.decide(world, state)
+    want = plain.decide(assumed_world, assumed_state)
+    np.testing.assert_array_equal(got.command, want.command)
+    np.testing.assert_array_equal(
+        assuming.scores(world, state), plain.scores(assumed_world, assumed_state)
+    )
+    # and they are assumptions, not what the teacher sees: the state it was given is unchanged
+    assert not state.h_reacts.any() and state.h_radius.max() < 0.75
+    assert not np.array_equal(plain.scores(world, state), assuming.scores(world, state))
+
+
+def test_assumptions_are_checked():
+    with pytest.raises(ConfigError, match="human_radius"):
+        Assumptions(human_radius=-0.1)
+    with pytest.raises(ConfigError, match="a_robot"):
+        Assumptions(a_robot=-1.0)
+    assert not Assumptions().active and TeacherConfig().assume == Assumptions()
 
 
 # --------------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ import torch
 import pioneer.learn.dagger as dagger
 import pioneer.reward.default as reward_default
 from pioneer.cli import main
-from pioneer.control.teacher import SoftMargins, make_teacher
+from pioneer.control.teacher import Assumptions, SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
@@ -697,6 +697,29 @@ def test_a_run_from_before_the_margin_tiers_reads_as_one_tier():
     assert cfg.margins.tiers == 1 != SoftMargins().tiers
     assert cfg == TINY_CFG.replace(margins=SoftMargins(tiers=1))
     assert DaggerConfig.from_dict(TINY_CFG.to_dict()) == TINY_CFG  # today's layout unchanged
+
+
+def test_the_labelling_teacher_makes_its_assumptions(monkeypatch, reward_file, tmp_path):
+    """``assume`` reaches the teacher that labels every episode; a run stored before it
+    existed reads as assuming nothing."""
+    from pioneer.learn import collect
+
+    assume = Assumptions(human_radius=0.5, a_robot=0.0)
+    made: list[Assumptions] = []
+    real = collect._teacher
+
+    def spy(scenario: str, reward: str, margins: SoftMargins, assumed: Assumptions) -> Any:
+        teacher = real(scenario, reward, margins, assumed)
+        made.append(teacher.config.assume)
+        return teacher
+
+    monkeypatch.setattr(collect, "_teacher", spy)
+    cfg = TINY_CFG.replace(rounds=0, assume=assume)
+    run_dagger(cfg, tmp_path / "run", workers=1, reward=reward_file, progress=False)
+    assert made and set(made) == {assume}
+    old = cfg.to_dict()
+    del old["assume"]
+    assert DaggerConfig.from_dict(old).assume == Assumptions()
 
 
 def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):

@@ -30,7 +30,7 @@ from pioneer.cli._common import (
     optional,
     require_some,
 )
-from pioneer.control.teacher import SoftMargins
+from pioneer.control.teacher import Assumptions, SoftMargins
 from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
@@ -49,6 +49,7 @@ __all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
 
 config_flags(DaggerConfig)
 config_flags(SoftMargins, human="human_margin", wall="wall_margin", tiers="margin_tiers")
+config_flags(Assumptions, human_radius="assume_radius", a_robot="assume_a_robot")
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")
 config_flags(WarmStartConfig, expert="bc_expert")

@@ -17,6 +17,12 @@ teacher chooses among all feasible ones. If none is feasible the teacher stops a
 (``fallback="evade"``, the default): then it drives the candidate whose predicted collision
 comes latest. An optional ``extra_score`` hook adds a scenario-specific term (the courteous
 demonstrator uses it to yield to people leaving the elevator).
+
+Beyond the paper, for a teacher whose student must drive many worlds (docs/student.md, "Which
+variation costs the student"): ``assume`` replaces, in the teacher's own predictions only,
+what a student cannot read from a scan by one value for every world — every person at least
+``human_radius`` large, every person reacting to the robot with ``a_robot``. The world the
+robot drives in is unchanged; where its people already are so, the decisions are the same.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
 
 __all__ = [
+    "Assumptions",
     "LookaheadTeacher",
     "SoftMargins",
     "TeacherConfig",
@@ -87,6 +94,44 @@ class SoftMargins(Config):
 
 
 @dataclasses.dataclass(frozen=True)
+class Assumptions(Config):
+    """What the teacher assumes of the people in its predictions, in place of what they are
+    (the defaults: nothing, they are predicted as they are). For the teacher of a student of
+    many worlds: the student cannot see how large a person is behind its near surface or
+    whether it will give way, and labels that depend on either are labels it cannot learn
+    (docs/student.md)."""
+
+    human_radius: NonNegative = 0.0  # [m] every person predicted at least this large (0: as is)
+    # [m/s²] every person predicted to react to the robot with this A_r (paper eq. 4's robot
+    # term), also those that ignore it (None: as they are)
+    a_robot: NonNegative | None = None
+
+    def apply(self, world: World, state: State, cache: dict[str, Any]) -> tuple[World, State]:
+        """``world`` and ``state`` as the teacher predicts them; ``cache`` keeps the last
+        world built (one per world, not per step)."""
+        if self.human_radius > 0.0:
+            state = dataclasses.replace(
+                state, h_radius=np.maximum(state.h_radius, self.human_radius)
+            )
+        if self.a_robot is not None:
+            if cache.get("source") is not world:
+                sim = world.sim
+                force = dataclasses.replace(sim.social_force, a_robot=self.a_robot)
+                cache["source"] = world
+                cache["assumed"] = World(
+                    world.walls, world.bounds, dataclasses.replace(sim, social_force=force)
+                )
+            world = cache["assumed"]
+            state = dataclasses.replace(state, h_reacts=np.ones_like(state.h_reacts))
+        return world, state
+
+    @property
+    def active(self) -> bool:
+        """Whether anything is assumed."""
+        return self.human_radius > 0.0 or self.a_robot is not None
+
+
+@dataclasses.dataclass(frozen=True)
 class TeacherConfig(Config):
     """Candidate set, horizon and smoothing of the lookahead teacher."""
 
@@ -103,6 +148,7 @@ class TeacherConfig(Config):
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
     margins: SoftMargins = SoftMargins()  # gaps preferred among the feasible candidates
+    assume: Assumptions = Assumptions()  # what the predictions assume of people (beyond the paper)
     # No feasible candidate: "stop" at once, or "evade" — stop unless standing still is
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Fallback = "evade"
@@ -150,6 +196,7 @@ class LookaheadTeacher:
         self.candidates = self.config.candidates()
         self._prev = np.zeros(2)
         self.last: TeacherDecision | None = None
+        self._assumed: dict[str, Any] = {}  # the world with the assumed reaction (Assumptions)
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Forget the previous command."""
@@ -171,6 +218,8 @@ class LookaheadTeacher:
         cfg = self.config
         if prev is not None:
             self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
+        if cfg.assume.active:
+            world, state = cfg.assume.apply(world, state, self._assumed)
         sc = self._score(world, state)
         if sc.n_feasible == 0:
             self._prev = self._fallback(world, state, sc)
@@ -220,6 +269,8 @@ class LookaheadTeacher:
         """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible (or, when
         some candidate keeps the soft margins, where it does not); the
         decision is its argmax (ties: the lowest candidate index)."""
+        if self.config.assume.active:
+            world, state = self.config.assume.apply(world, state, self._assumed)
         return self._score(world, state).scored
 
     def _score(self, world: World, state: State) -> _Scores:
@@ -293,13 +344,17 @@ def make_teacher(
     wall_margin: float = SoftMargins.wall,
     margin_tiers: int = SoftMargins.tiers,
     precision: RolloutPrecision = TeacherConfig.precision,
+    assume_radius: float = Assumptions.human_radius,
+    assume_a_robot: float | None = Assumptions.a_robot,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
     (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (fast, the default; float32
-    rays; or float64, the reference: :mod:`pioneer.control.precision`)."""
+    rays; or float64, the reference: :mod:`pioneer.control.precision`); ``assume_radius``
+    [m] and ``assume_a_robot`` [m/s²] what its predictions assume of every person
+    (:class:`Assumptions`; beyond the paper)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -314,6 +369,7 @@ def make_teacher(
         precision=precision,
         fallback=fallback,
         margins=SoftMargins(human=human_margin, wall=wall_margin, tiers=margin_tiers),
+        assume=Assumptions(human_radius=assume_radius, a_robot=assume_a_robot),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)

@@ -48,6 +48,8 @@ _FIX = "evaluate into a new --out, or pass --overwrite to start over (deletes it
 PARAMETERS_ADDED: dict[str, Any] = {
     "precision": "float64",  # the teacher's ray precision (make_teacher, 2026-11-26)
     "hold": 0,  # the shield's fallback steps after an unsure one (make_shield_policy, 2026-11-27)
+    "assume_radius": 0.0,  # what the teacher's predictions assume of people (make_teacher,
+    "assume_a_robot": None,  # 2026-11-27): nothing
 }
 
 

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from pioneer.imitation.store import file_version, save_episode
 
 if TYPE_CHECKING:  # the teacher is imported in the worker, when it is first needed
-    from pioneer.control.teacher import SoftMargins
+    from pioneer.control.teacher import Assumptions, SoftMargins
 
 __all__ = [
     "CollectTask",
@@ -27,8 +27,8 @@ __all__ = [
 
 _CACHE: dict[tuple[Any, ...], Any] = {}
 # One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
-# env seed, output path, label_prev, the teacher's soft margins.
-CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins"]
+# env seed, output path, label_prev, the teacher's soft margins and assumptions.
+CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins", "Assumptions"]
 # One episode a student drives alone: index, scenario, student checkpoint, env seed.
 DriveTask = tuple[int, str, str, int]
 
@@ -38,10 +38,10 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _teacher(scenario: str, reward: str, margins: SoftMargins) -> Any:
+def _teacher(scenario: str, reward: str, margins: SoftMargins, assume: Assumptions) -> Any:
     # One teacher per reward file: it plans from the privileged state and world of each step,
     # so the variants of a layout distribution that share a reward share the teacher.
-    key = ("teacher", reward, margins)
+    key = ("teacher", reward, margins, assume)
     if key not in _CACHE:
         from pioneer.control.teacher import make_teacher
 
@@ -51,6 +51,8 @@ def _teacher(scenario: str, reward: str, margins: SoftMargins) -> Any:
             human_margin=margins.human,
             wall_margin=margins.wall,
             margin_tiers=margins.tiers,
+            assume_radius=assume.human_radius,
+            assume_a_robot=assume.a_robot,
         )
     return _CACHE[key]
 
@@ -98,16 +100,23 @@ def collect_episode(
     env_seed: int,
     label_prev: str,
     margins: SoftMargins,
+    assume: Assumptions | None = None,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
     labels), ``applied (T, 2)``, ``gap (T,)`` (surface to surface, at decision time), ``aleatoric``,
     ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome.
-    ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`)."""
+    ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`),
+    ``assume`` what its predictions assume of people (:class:`~pioneer.control.teacher.Assumptions`;
+    None: nothing)."""
     from pioneer.envs.env import NavEnv
     from pioneer.envs.episode import Episode, Step
 
-    teacher = _teacher(scenario, reward, margins)
+    if assume is None:
+        from pioneer.control.teacher import Assumptions
+
+        assume = Assumptions()
+    teacher = _teacher(scenario, reward, margins, assume)
     student = _student(checkpoint) if checkpoint is not None else None
     driver = _Labelled(teacher, student, label_prev)
     rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
@@ -143,8 +152,8 @@ def collect_episode(
 def collect_task(args: CollectTask) -> str:
     """Collect one episode (:func:`collect_episode`) and write it to its path: the
     :class:`pioneer.imitation.rounds.Collector` function of DAgger's students."""
-    scenario, reward, checkpoint, env_seed, path, label_prev, margins = args
-    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev, margins)
+    scenario, reward, checkpoint, env_seed, path, label_prev, margins, assume = args
+    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev, margins, assume)
     return save_episode(path, ep)
 
 

@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
 from pioneer.config import Config
-from pioneer.control.teacher import SoftMargins
+from pioneer.control.teacher import Assumptions, SoftMargins
 from pioneer.data import base_scenario
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
@@ -127,6 +127,10 @@ class DaggerConfig(Config):
     # labels). Equal on teacher-driven steps.
     label_prev: LabelPrev = "applied"
     margins: SoftMargins = SoftMargins()  # the teacher's soft margins while it labels
+    # Beyond the paper: what the labelling teacher's predictions assume of every person in
+    # place of what the student cannot see (docs/student.md, "Which variation costs the
+    # student")
+    assume: Assumptions = Assumptions()
     teacher_episodes: Count = 50  # round 0, driven by the teacher
     rounds: NonNegativeInt = 10  # student-driven rounds after round 0
     episodes_per_round: Count = 50  # episodes of every later round
@@ -382,7 +386,16 @@ class _Students:
         name = _episode_scenario(cfg, sorted(self.rewards), rnd, index)
         seed = dagger_seed(cfg.scenario, cfg.seed, rnd, index)
         ckpt = None if driver is None else str(driver)
-        return (name, str(self.rewards[name]), ckpt, seed, str(path), cfg.label_prev, cfg.margins)
+        return (
+            name,
+            str(self.rewards[name]),
+            ckpt,
+            seed,
+            str(path),
+            cfg.label_prev,
+            cfg.margins,
+            cfg.assume,
+        )
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
         """Inputs (the observation, and o_{t−1} or u_{t−1} for a student that reads them:
