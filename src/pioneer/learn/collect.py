@@ -100,22 +100,18 @@ def collect_episode(
     env_seed: int,
     label_prev: str,
     margins: SoftMargins,
-    assume: Assumptions | None = None,
+    assume: Assumptions,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
     labels), ``applied (T, 2)``, ``gap (T,)`` (surface to surface, at decision time), ``aleatoric``,
     ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome.
     ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`),
-    ``assume`` what its predictions assume of people (:class:`~pioneer.control.teacher.Assumptions`;
-    None: nothing)."""
+    ``assume`` what its predictions assume of people
+    (:class:`~pioneer.control.teacher.Assumptions`)."""
     from pioneer.envs.env import NavEnv
     from pioneer.envs.episode import Episode, Step
 
-    if assume is None:
-        from pioneer.control.teacher import Assumptions
-
-        assume = Assumptions()
     teacher = _teacher(scenario, reward, margins, assume)
     student = _student(checkpoint) if checkpoint is not None else None
     driver = _Labelled(teacher, student, label_prev)
