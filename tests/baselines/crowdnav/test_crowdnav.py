@@ -412,6 +412,7 @@ def test_a_signal_stops_training_between_updates_and_the_rerun_matches(
         (["--envs", "1"], "minibatches"),
         (["--resume"], "--resume"),
         (["--lr", "-1"], "--lr"),
+        (["--threads", "0"], "--threads"),
     ],
 )
 def test_train_cli_bad_input(tmp_path, capsys, extra, needle):

@@ -68,6 +68,30 @@ def test_numpy_step_equals_the_module_for_the_shipped_weights(scenario):
     assert _compare_along_episode(model, scenario, seed=21) > 10
 
 
+def test_a_training_rollouts_step_equals_the_module_with_the_value():
+    """:meth:`CrowdNavInference.act`, the trainer's acting step for a batch of worlds: the
+    module's mean, value and GRU state (``encode``, ``gru``, ``heads``) to float32 rounding."""
+    model = CrowdNavNet(CrowdNavConfig(max_humans=3), seed=4)
+    with torch.no_grad():  # a critic whose values are not ≈ 0
+        for p in model.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=torch.Generator().manual_seed(p.numel())))
+    env = NavEnv("hr-rl")
+    infos = [env.reset(seed=s)[1] for s in range(5)]
+    obs = [build_observation(i["state"], i["world"], model.config) for i in infos]
+    batch = type(obs[0])(*(np.concatenate(parts) for parts in zip(*obs, strict=True)))
+    h = np.random.default_rng(1).normal(size=(5, model.config.hidden)).astype(np.float32)
+    mean, value, h_new = CrowdNavInference(model).act(batch, h)
+    with torch.inference_mode():
+        x, _, _ = model.encode(*obs_tensors(batch))
+        h_ref = model.gru(x, torch.from_numpy(h))
+        mean_ref, value_ref = model.heads(h_ref)
+    assert mean.shape == (5, 2) and value.shape == (5,) and h_new.shape == h.shape
+    for got, want in ((mean, mean_ref), (value, value_ref), (h_new, h_ref)):
+        assert got.dtype == np.float32
+        np.testing.assert_allclose(got, want.numpy(), rtol=0, atol=ATOL)
+    assert np.ptp(value) > 1e-3  # the critic sees the worlds apart
+
+
 def test_masked_rows_and_an_empty_scene():
     """No human in range: the attention rows are all zero, as the module's, and padded slots
     never change the result."""

@@ -11,7 +11,8 @@ tanh come from other libraries (OpenBLAS and NumPy's SIMD loops instead of PyTor
 their last bits differ. ``make_crowdnav_policy(forward="torch")`` keeps the module's own
 forward as the reference; the tests compare both step by step, and docs/baselines.md records
 the two side by side on validation episodes. Training (:mod:`~pioneer.baselines.crowdnav.ppo`)
-always uses the module.
+acts through this forward too, with the critic's value (:meth:`CrowdNavInference.act`), and
+updates the module.
 """
 
 from __future__ import annotations
@@ -44,8 +45,9 @@ def _masked_softmax(scores: F32, mask: NDArray[np.bool_]) -> F32:
 
 
 class CrowdNavInference:
-    """The forward pass of a :class:`CrowdNavNet` for acting: graph encoding, one GRU step and
-    the actor's mean (the critic is not evaluated)."""
+    """The forward pass of a :class:`CrowdNavNet` for acting: graph encoding, one GRU step, the
+    actor's mean and, for training's rollouts, the critic's value. The weights are those of
+    the module when this object is made (a trainer makes a new one after every update)."""
 
     def __init__(self, model: CrowdNavNet) -> None:
         cfg = model.config
@@ -64,6 +66,8 @@ class CrowdNavInference:
         self._merge = linear("merge")
         self._actor = (linear("actor.0"), linear("actor.2"))
         self._mean = linear("mean_head")
+        self._critic = (linear("critic.0"), linear("critic.2"))
+        self._value = linear("value_head")
         self._w_ih = np.ascontiguousarray(p["gru.weight_ih"].T)  # (E, 3H): r, z, n
         self._w_hh = np.ascontiguousarray(p["gru.weight_hh"].T)  # (H, 3H)
         self._b_ih = p["gru.bias_ih"].copy()
@@ -76,6 +80,20 @@ class CrowdNavInference:
     def step(self, obs: CrowdNavObs, h: F32) -> tuple[F32, F32, F32]:
         """``(mean (B, 2), robot–human weights (B, N), new GRU state (B, H))`` of one step of
         ``B`` worlds from their observations and GRU states ``h (B, H)``."""
+        x, a_rh = self._encode(obs)
+        h_new = self._gru(x, h)
+        return self._head(self._actor, self._mean, h_new), a_rh, h_new
+
+    def act(self, obs: CrowdNavObs, h: F32) -> tuple[F32, F32, F32]:
+        """``(mean (B, 2), value (B,), new GRU state (B, H))``: a training rollout's step (as
+        the module's ``encode``, ``gru`` and ``heads``)."""
+        x, _ = self._encode(obs)
+        h_new = self._gru(x, h)
+        mean = self._head(self._actor, self._mean, h_new)
+        return mean, self._head(self._critic, self._value, h_new)[:, 0], h_new
+
+    def _encode(self, obs: CrowdNavObs) -> tuple[F32, F32]:
+        """The graph features ``x (B, E)`` and the robot–human weights ``(B, N)``."""
         e = self.config.embed
         mask = obs.mask
         w, b = self._robot
@@ -94,12 +112,14 @@ class CrowdNavInference:
         a_rh = _masked_softmax((keys @ query[:, :, None])[..., 0] * self._scale, mask)
         c = (a_rh[:, :, None] * hum).sum(axis=1)
         w, b = self._merge
-        x = np.maximum(np.concatenate([r, c], axis=-1) @ w + b, 0.0)
-        h_new = self._gru(x, h)
-        (w1, b1), (w2, b2) = self._actor
-        f = np.tanh(np.tanh(h_new @ w1 + b1) @ w2 + b2)
-        w, b = self._mean
-        return f @ w + b, a_rh, h_new
+        return np.maximum(np.concatenate([r, c], axis=-1) @ w + b, 0.0), a_rh
+
+    @staticmethod
+    def _head(trunk: tuple[tuple[F32, F32], tuple[F32, F32]], out: tuple[F32, F32], h: F32) -> F32:
+        """``out(tanh(tanh(h W1 + b1) W2 + b2))``: the actor's or the critic's head."""
+        (w1, b1), (w2, b2) = trunk
+        w, b = out
+        return np.tanh(np.tanh(h @ w1 + b1) @ w2 + b2) @ w + b
 
     def _gru(self, x: F32, h: F32) -> F32:
         """One step of PyTorch's GRUCell (equations in :mod:`pioneer.nn.recurrent`)."""

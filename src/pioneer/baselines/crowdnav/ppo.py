@@ -40,7 +40,12 @@ Recurrent minibatches are whole 30-step sequences of a subset of the environment
 is re-run from the rollout's first hidden state with resets at episode starts, the whole
 sequence in one numba kernel each way (:func:`pioneer.nn.recurrent.gru_sequence`, equal to
 the step-by-step ``GRUCell`` to float32 rounding); Adam is PyTorch's fused one. Advantages
-are normalised over the rollout.
+are normalised over the rollout. The rollouts act through the network's NumPy forward
+(:class:`~.inference.CrowdNavInference`, with the critic's value); the update runs in torch,
+on one intra-op thread by default (``torch_threads``: on an otherwise idle 2-core machine
+two threads train ≈ 1.3× faster, beside another busy process ≈ 2× slower, docs/performance.md;
+a seeded run repeats itself with any fixed number, and on the hosts measured 1 and 2 threads
+gave the same weights bit for bit).
 
 Outputs in ``out/`` (each written atomically)
     ``checkpoint.safetensors``  the whole training state every ``checkpoint_every`` updates:
@@ -205,6 +210,7 @@ def train_crowdnav(
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
     ``True`` requires it, ``False`` refuses an ``out`` that holds one (nothing is deleted).
+    ``torch_threads``: torch's intra-op threads (``None``: leave torch's setting).
     Every setting is checked before ``out`` is created; one run writes to it at a time
     (:func:`pioneer.io.run_lock`).
     """
