@@ -44,6 +44,7 @@ EXTRAS = {
     "pygame": "teleop",
     "ray": "distributed",
     "pysocialforce": "bench",
+    "stable_baselines3": "sb3",
 }
 
 _OS_FIXES = {

@@ -181,6 +181,25 @@ def test_missing_optional_dependency_is_one_line_naming_the_extra(tmp_path, caps
     assert list(tmp_path.iterdir()) == []
 
 
+def test_missing_sb3_names_its_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)
+    out = tmp_path / "sb3"
+    code = main(["train", "sb3-ppo", "--scenario", "static", "--steps", "64", "--out", str(out)])
+    _one_error_line(capsys, code, "module stable_baselines3", "pip install 'pioneer-nav[sb3]'")
+    assert not out.exists()
+
+
+def test_every_extra_named_in_errors_is_one_of_the_packages_extras():
+    """:data:`pioneer.errors.EXTRAS` names extras that ``pyproject.toml`` declares."""
+    import tomllib
+
+    from pioneer.errors import EXTRAS
+
+    root = Path(__file__).resolve().parents[2]
+    declared = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    assert set(EXTRAS.values()) <= set(declared["optional-dependencies"])
+
+
 @pytest.mark.parametrize(
     ("args", "needle"),
     [

@@ -114,6 +114,32 @@ def test_missing_pygame_is_a_one_line_cli_error(monkeypatch, tmp_path, capsys):
     assert not (tmp_path / "d.npz").exists()
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="DISPLAY is X11's / Wayland's")
+def test_no_display_is_a_one_line_cli_error(monkeypatch, tmp_path, capsys):
+    """Without a display (and no SDL_VIDEODRIVER asking for a headless one) teleop refuses at
+    once: SDL would otherwise fall back to a driver without a window and record a robot
+    nobody can see."""
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+        monkeypatch.delenv(var, raising=False)
+    assert main(["teleop", "--scenario", "static", "--out", str(tmp_path / "d.npz")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "display" in err[0] and "fix:" in err[0]
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_fallback_to_a_driver_without_a_window_is_refused(monkeypatch, tmp_path):
+    """A display variable that names no usable display: SDL falls back to its offscreen
+    driver, which teleop refuses unless SDL_VIDEODRIVER asked for it."""
+    pygame = pytest.importorskip("pygame")
+    monkeypatch.delenv("SDL_VIDEODRIVER", raising=False)
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(pygame.display, "init", lambda: None)
+    monkeypatch.setattr(pygame.display, "get_driver", lambda: "offscreen")
+    with pytest.raises(PioneerError, match="offscreen"):
+        TeleopSession("static", tmp_path / "d.npz")
+    assert not any(tmp_path.iterdir())
+
+
 # ---------------------------------------------------------------------------------- sessions
 @pytest.fixture
 def pg(monkeypatch) -> Any:

@@ -29,6 +29,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from pioneer.bounds import NonNegative, Positive
+from pioneer.config import Config
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
@@ -52,16 +54,16 @@ DEMONSTRATORS: tuple[str, ...] = ("teacher", "courteous")
 
 
 @dataclasses.dataclass(frozen=True)
-class Selection:
+class Selection(Config):
     """Which successful episodes make positive demonstrations: efficient and with a margin.
 
     The defaults keep what a skilled operator drives in the paper world (the paper's teacher:
     12.2–12.9 s, 3.7–3.9 m): a demonstration that lingers teaches the density to linger.
     """
 
-    max_time_s: float = 14.0  # [s] episode time at most
-    max_path_m: float = 4.3  # [m] path length at most
-    min_gap_m: float = 0.0  # [m] closest approach to a person (surface to surface) at least
+    max_time_s: Positive = 14.0  # [s] episode time at most
+    max_path_m: Positive = 4.3  # [m] path length at most
+    min_gap_m: NonNegative = 0.0  # [m] closest approach to a person (surface to surface) at least
 
     def keeps(self, time_s: float, path_m: float, gap_m: float) -> bool:
         """Whether a successful episode with these statistics is kept."""
@@ -115,7 +117,7 @@ def _sample_counts(name: str, n_positive: int | None, n_negative: int | None) ->
                 "sample counts",
                 "n_positive, n_negative >= 0, not both 0",
                 (n_pos, n_neg),
-                "fix the counts",
+                "ask for at least one sample (--positive N or --negative N), none below 0",
             )
         )
     return n_pos, n_neg

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import types
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -62,6 +63,8 @@ __all__ = [
 ]
 
 KEYS = ("up", "down", "left", "right", "space", "n", "b", "r", "escape")
+# SDL video drivers without a window: refused unless asked for by SDL_VIDEODRIVER
+HEADLESS_DRIVERS = ("offscreen", "dummy")
 V_STEP = 0.1  # [m/s] per UP/DOWN press
 OMEGA_STEP = 0.2  # [rad/s] per LEFT/RIGHT press
 STATUS_HEIGHT = 68  # [px] text area below the scene (three lines)
@@ -228,18 +231,29 @@ class TeleopSession:
 
         self._pg = _import_pygame()
         pg = self._pg
+        fix = "run it in a desktop session (SDL_VIDEODRIVER=dummy: headless, no window)"
+        if (
+            sys.platform.startswith("linux")
+            and not os.environ.get("SDL_VIDEODRIVER")
+            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+        ):
+            raise PioneerError(
+                expect("teleop window", "a display (DISPLAY or WAYLAND_DISPLAY)", "none", fix)
+            )
         try:
             pg.display.init()
             pg.font.init()
         except pg.error as exc:
             raise PioneerError(
-                expect(
-                    "teleop window",
-                    "a display pygame can open",
-                    str(exc),
-                    "run it in a desktop session (SDL_VIDEODRIVER=dummy: headless, no window)",
-                )
+                expect("teleop window", "a display pygame can open", str(exc), fix)
             ) from exc
+        driver = pg.display.get_driver()
+        if driver in HEADLESS_DRIVERS and not os.environ.get("SDL_VIDEODRIVER"):
+            # SDL fell back to a driver without a window: nobody could see or steer the robot
+            pg.display.quit()
+            raise PioneerError(
+                expect("teleop window", "a display pygame can open", f"only SDL's {driver!r}", fix)
+            )
         self._keymap = {
             pg.K_UP: "up",
             pg.K_DOWN: "down",

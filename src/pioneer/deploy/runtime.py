@@ -287,7 +287,7 @@ class StudentRuntime:
         import onnxruntime as ort
 
         p = Path(onnx_path)
-        fix = "re-export it with pioneer.learn.export.export_onnx"
+        fix = "export the student again: pioneer export --model CHECKPOINT --out FILE.onnx"
         if not p.is_file():
             raise DataError(expect("student ONNX model", "an existing file", str(p), fix))
         opts = ort.SessionOptions()
@@ -300,8 +300,9 @@ class StudentRuntime:
                 str(p), sess_options=opts, providers=["CPUExecutionProvider"]
             )
         except Exception as exc:  # onnxruntime raises its own untyped errors
+            reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
             raise DataError(
-                expect(f"student ONNX model {p}", "a valid ONNX file", "", fix)
+                expect(f"student ONNX model {p}", "a valid ONNX file", reason, fix)
             ) from exc
         meta: Mapping[str, str] = self.session.get_modelmeta().custom_metadata_map
         if meta.get("format") != ONNX_FORMAT:

@@ -500,7 +500,12 @@ def evaluate(
     """
     if seeds < 1 or trials < 1:
         raise ConfigError(
-            expect("seeds/trials", "integers >= 1", (seeds, trials), "fix the counts")
+            expect(
+                "seeds/trials",
+                "integers >= 1",
+                (seeds, trials),
+                "set seeds and trials (--seeds, --trials) >= 1",
+            )
         )
     if seed_set not in SEED_SETS:
         raise ConfigError(expect("seed set", f"one of {SEED_SETS}", seed_set, "pick one"))
