@@ -120,7 +120,7 @@ class TrainCrowdNav:
     warm: tyro.conf.OmitArgPrefixes[WarmStartConfig] = WarmStartConfig()
     """imitation warm start and critic warm-up (all off by default: pure PPO)"""
     threads: Annotated[int, Ge(1)] = default(train_crowdnav, "torch_threads")
-    """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.3× faster)"""
+    """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.2× faster)"""
     resume: Flag = False
     """require a checkpoint in --out (default: resume if there is one)"""
 

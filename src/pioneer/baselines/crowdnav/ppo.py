@@ -43,7 +43,7 @@ the step-by-step ``GRUCell`` to float32 rounding); Adam is PyTorch's fused one. 
 are normalised over the rollout. The rollouts act through the network's NumPy forward
 (:class:`~.inference.CrowdNavInference`, with the critic's value); the update runs in torch,
 on one intra-op thread by default (``torch_threads``: on an otherwise idle 2-core machine
-two threads train ≈ 1.3× faster, beside another busy process ≈ 2× slower, docs/performance.md;
+two threads train ≈ 1.2× faster, beside another busy process ≈ 2× slower, docs/performance.md;
 a seeded run repeats itself with any fixed number, and on the hosts measured 1 and 2 threads
 gave the same weights bit for bit).
 
