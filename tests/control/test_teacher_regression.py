@@ -16,12 +16,13 @@ exponent amplifies the rounding. Measured on these states with ``OPENBLAS_CORETY
 (2026-11-27): 4·10⁻⁸ relative with SkylakeX (AVX-512, where the reference was made), 5·10⁻⁶
 with Haswell and Zen (AVX2 + FMA), 4.9·10⁻⁵ with every kernel without FMA (Prescott, Core2,
 Nehalem, Atom, Sandybridge, Barcelona, Bulldozer, Excavator); no choice changed in any. The
-tolerance and the tie are 4× the largest; the smallest stored margin is 5·10⁻⁴. The number of feasible candidates
-is compared exactly only where no candidate's predicted clearance (to people or walls) lies
-within ``CLEAR_TIE`` of 0 or of a soft margin — the paper-world reference stores that margin
-(``clear_margin``); where one does, its feasibility may flip between CPUs and the decision is
-not compared. The number "feasible" is of the candidates the teacher chooses among (those
-that keep the soft margins, when any does).
+tolerance and the tie are 4× the largest; the smallest stored margin is 5·10⁻⁴.
+
+The number of feasible candidates is compared exactly only where no candidate's predicted
+clearance (to people or walls) lies within ``CLEAR_TIE`` of 0 or of a soft margin — the
+paper-world reference stores that margin (``clear_margin``); where one does, its feasibility
+may flip between CPUs and the decision is not compared. The number "feasible" is of the
+candidates the teacher chooses among (those that keep the soft margins, when any does).
 
 Two references: ``teacher_regression.npz`` pins the compact world (``hr-rl-compact``,
 ``hl-rr-compact``, with their shipped demos; stored under the names ``hr-rl`` and ``hl-rr`` it
