@@ -151,7 +151,7 @@ class TrainSb3:
     scenario: str = DEFAULT_SCENARIO
     """hr-rl → pioneer/ElevatorHRRL-v1, hl-rr → pioneer/ElevatorHLRR-v1; others by name"""
     steps: int = 1_000_000
-    """total environment steps"""
+    """total environment steps, rounded up to whole PPO updates (SB3's 2,048 steps × envs)"""
     envs: int = default(train_sb3_ppo, "n_envs")
     """environments (SB3's make_vec_env)"""
     seed: Seed = default(train_sb3_ppo, "seed")
