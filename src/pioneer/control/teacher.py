@@ -107,8 +107,8 @@ class Assumptions(Config):
     a_robot: NonNegative | None = None
 
     def apply(self, world: World, state: State, cache: dict[str, Any]) -> tuple[World, State]:
-        """``world`` and ``state`` as the teacher predicts them; ``cache`` keeps the last
-        world built (one per world, not per step)."""
+        """``world`` and ``state`` as the teacher predicts them (the same objects when nothing
+        is assumed); ``cache`` keeps the last world built (one per world, not per step)."""
         if self.human_radius > 0.0:
             state = dataclasses.replace(
                 state, h_radius=np.maximum(state.h_radius, self.human_radius)
@@ -218,8 +218,7 @@ class LookaheadTeacher:
         cfg = self.config
         if prev is not None:
             self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
-        if cfg.assume.active:
-            world, state = cfg.assume.apply(world, state, self._assumed)
+        world, state = cfg.assume.apply(world, state, self._assumed)
         sc = self._score(world, state)
         if sc.n_feasible == 0:
             self._prev = self._fallback(world, state, sc)
@@ -269,8 +268,7 @@ class LookaheadTeacher:
         """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible (or, when
         some candidate keeps the soft margins, where it does not); the
         decision is its argmax (ties: the lowest candidate index)."""
-        if self.config.assume.active:
-            world, state = self.config.assume.apply(world, state, self._assumed)
+        world, state = self.config.assume.apply(world, state, self._assumed)
         return self._score(world, state).scored
 
     def _score(self, world: World, state: State) -> _Scores:
