@@ -34,3 +34,21 @@ def test_weights_within_pytorchs_default_bounds():
     assert float(layer.weight.abs().max()) <= bound
     assert float(layer.bias.abs().max()) <= bound
     assert bool(torch.isfinite(layer.weight).all())
+
+
+def test_numpy_tanh_matches_torch_tanh_and_its_gradient():
+    from pioneer.nn.layers import Tanh
+
+    gen = torch.Generator().manual_seed(0)
+    x = (torch.randn(7, 5, 9, generator=gen, dtype=torch.float64) * 3).requires_grad_(True)
+    y = Tanh()(x)
+    torch.testing.assert_close(y, torch.tanh(x), rtol=0, atol=1e-15)
+    up = torch.randn(y.shape, generator=gen, dtype=torch.float64)
+    (g,) = torch.autograd.grad((y * up).sum(), x)
+    (want,) = torch.autograd.grad((torch.tanh(x) * up).sum(), x)
+    torch.testing.assert_close(g, want, rtol=0, atol=1e-14)
+    assert torch.autograd.gradcheck(Tanh(), (x[:2, :2, :3].detach().requires_grad_(True),))
+    x32 = x.detach().to(torch.float32)[:, ::2]  # a strided view
+    y32 = Tanh()(x32)
+    assert y32.dtype == torch.float32
+    torch.testing.assert_close(y32, torch.tanh(x32), rtol=0, atol=2e-7)

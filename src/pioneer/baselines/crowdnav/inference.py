@@ -36,7 +36,7 @@ def _sigmoid(x: F32) -> F32:
 
 def _masked_softmax(scores: F32, mask: NDArray[np.bool_]) -> F32:
     """Softmax over the last axis restricted to ``mask``; masked entries exactly 0, a row with
-    no unmasked entry all zeros (as :func:`pioneer.baselines.crowdnav.network._masked_softmax`)."""
+    no unmasked entry all zeros (as :mod:`pioneer.nn.attention`)."""
     s = np.where(mask, scores, np.float32(-np.inf))
     top = s.max(axis=-1, keepdims=True)
     top = np.where(np.isfinite(top), top, np.float32(0.0))
