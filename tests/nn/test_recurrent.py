@@ -75,3 +75,31 @@ def test_float32_equals_the_cell_loop_to_rounding_and_repeats_bit_for_bit():
     assert torch.equal(again, got)
     for a, b in zip(torch.autograd.grad(again.sum(), [x, *cell.parameters()]), grads, strict=True):
         assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize(("dtype", "rel"), [("float32", 4e-7), ("float64", 1e-13)])
+def test_tanh_from_one_exp_is_within_its_stated_error(dtype, rel):
+    """The recurrence's tanh (one ``exp`` and a series near 0) against float64/longdouble tanh,
+    over normal values, the series' range and its edges, ±0, tiny and saturated inputs."""
+    import numpy as np
+    from numba import njit
+
+    from pioneer.nn.recurrent import _tanh, _tanh_constants
+
+    @njit
+    def run(x, one, c, out):
+        for i in range(x.size):
+            out[i] = _tanh(x[i], one, c)
+
+    dt = np.dtype(dtype)
+    r = np.random.default_rng(0)
+    edge = [0.0, -0.0, 1e-30, -1e-8, 0.125, -0.125, 2.0**-10, 20.0, -20.0, 100.0, -100.0]
+    x = np.concatenate([r.standard_normal(50_000) * 3, r.uniform(-0.2, 0.2, 50_000), edge])
+    x = x.astype(dt)
+    x = np.concatenate([x, np.nextafter(x[-11:], dt.type(0.0))])
+    out = np.empty_like(x)
+    run(x, dt.type(1.0), _tanh_constants(dt), out)
+    exact = np.tanh(x.astype(np.longdouble))
+    err = np.abs(out - exact) / np.maximum(np.abs(exact), np.finfo(dt).tiny)
+    assert float(err.max()) <= rel
+    assert np.array_equal(np.signbit(out), np.signbit(x))
