@@ -181,21 +181,29 @@ def _np(x: torch.Tensor) -> F:
     return np.ascontiguousarray(x.detach().numpy())
 
 
+def _bool(mask: torch.Tensor) -> B:
+    return np.ascontiguousarray(mask.numpy(), dtype=np.bool_)
+
+
+def _outputs(ctx: Any, out: F, a: F, saved: tuple[Any, ...]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Keep ``saved`` for the backward pass; return the output and the weights (no gradient)."""
+    ctx.arrays = saved
+    weights = torch.from_numpy(a)
+    ctx.mark_non_differentiable(weights)
+    return torch.from_numpy(out), weights
+
+
 class _NodeAttention(torch.autograd.Function):
     @staticmethod
     def forward(
         ctx: Any, qkv: torch.Tensor, s: torch.Tensor, mask: torch.Tensor, scale: float
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        q, s_np, m = _np(qkv), _np(s), np.ascontiguousarray(mask.numpy(), dtype=np.bool_)
+        q, s_np = _np(qkv), _np(s)
         m_len, n, _ = q.shape
-        out = np.empty_like(s_np)
-        a = np.empty((m_len, n, n), q.dtype)
+        out, a = np.empty_like(s_np), np.empty((m_len, n, n), q.dtype)
         sc = q.dtype.type(scale)
-        _node_forward(q, s_np, m, sc, out, a)
-        ctx.arrays = (q, out, a, sc)
-        weights = torch.from_numpy(a)
-        ctx.mark_non_differentiable(weights)
-        return torch.from_numpy(out), weights
+        _node_forward(q, s_np, _bool(mask), sc, out, a)
+        return _outputs(ctx, out, a, (q, out, a, sc))
 
     @staticmethod
     def backward(
@@ -218,15 +226,10 @@ class _PoolAttention(torch.autograd.Function):
         scale: float,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         k, q, v = _np(keys), _np(query), _np(values)
-        m = np.ascontiguousarray(mask.numpy(), dtype=np.bool_)
-        out = np.empty_like(q)
-        a = np.empty(k.shape[:2], k.dtype)
+        out, a = np.empty_like(q), np.empty(k.shape[:2], k.dtype)
         sc = k.dtype.type(scale)
-        _pool_forward(k, q, v, m, sc, out, a)
-        ctx.arrays = (k, q, v, a, sc)
-        weights = torch.from_numpy(a)
-        ctx.mark_non_differentiable(weights)
-        return torch.from_numpy(out), weights
+        _pool_forward(k, q, v, _bool(mask), sc, out, a)
+        return _outputs(ctx, out, a, (k, q, v, a, sc))
 
     @staticmethod
     def backward(
