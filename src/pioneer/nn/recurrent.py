@@ -15,12 +15,13 @@ by their dispatch, not by arithmetic. :func:`gru_sequence` computes the input si
 ``W_i x + b_i`` of every step in one product (autograd), then runs the recurrence in one
 numba kernel (the gates fused into one loop, one matrix product per step) and
 differentiates it by hand in another: one matrix product per step back, the recurrent
-weights' gradient in one product over the sequence; the candidate state's tanh from one
-``exp`` (:func:`_tanh`: numba's own took 16 ns a value, most of the recurrence's time). The
-result equals the loop of ``GRUCell`` to float32 rounding (sums grouped differently; the
-tests compare both, with ``torch.autograd.gradcheck`` on the hand-written backward in
-float64). No ``fastmath``: a
-seeded run repeats bit for bit.
+weights' gradient in one product over the sequence. The gates' e^x are taken a row at a time,
+in float32 by :mod:`pioneer.vecmath` (in SIMD lanes, where numba calls libm once a value), and
+the candidate state's tanh from the same e^x (:func:`_tanh_from_exp`: numba's own tanh took
+16 ns a value, most of the recurrence's time). The result equals the loop of ``GRUCell`` to
+float32 rounding (sums grouped differently; the tests compare both, with
+``torch.autograd.gradcheck`` on the hand-written backward in float64). No ``fastmath`` but the
+float32 e^x's ``contract``: a seeded run repeats bit for bit on one machine.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ import torch
 from numba import njit
 from numpy.typing import NDArray
 from torch import nn
+
+from pioneer.vecmath import exp32_row
 
 __all__ = ["gru_sequence"]
 
@@ -49,32 +52,57 @@ def _tanh_constants(dtype: np.dtype[Any]) -> F:
 
 
 @njit(cache=True, inline="always")
-def _tanh(x: Any, one: Any, c: F) -> Any:  # pragma: no cover - compiled
-    """tanh x from one ``exp``: (1 − e)/(1 + e) · sign x with e = e^{−2|x|}, and where
-    |x| < ``c[3]`` (1 − e would cancel there) the series with coefficients ``c[:3]``
-    (:data:`_TANH_SERIES`; ``c`` in the arrays' dtype, :func:`_tanh_constants`). Within
-    4·10⁻⁷ relative of the exact value in float32 and 10⁻¹³ in float64 (tested), in 3–4 ns
-    where numba's ``np.tanh`` (libm's) takes 16 ns — it was most of the forward recurrence's
-    time."""
-    a = abs(x)
-    e = np.exp(-(a + a))
+def _tanh_from_exp(x: Any, e: Any, one: Any, c: F) -> Any:  # pragma: no cover - compiled
+    """tanh x given e = e^{−2|x|}: (1 − e)/(1 + e) · sign x, and where |x| < ``c[3]`` (1 − e
+    would cancel there) the series with coefficients ``c[:3]`` (:data:`_TANH_SERIES`; ``c`` in
+    the arrays' dtype, :func:`_tanh_constants`). With libm's e^x within 4·10⁻⁷ relative of the
+    exact value in float32 and 10⁻¹³ in float64, with :mod:`pioneer.vecmath`'s float32 e^x within
+    6·10⁻⁷ (tested); numba's own ``np.tanh`` (libm's) took 16 ns a value."""
     t = math.copysign((one - e) / (one + e), x)
     x2 = x * x
     series = x * (one - x2 * (c[0] - x2 * (c[1] - x2 * c[2])))
-    return series if a < c[3] else t  # both computed: a select, not a branch to mispredict
+    return series if abs(x) < c[3] else t  # both computed: a select, not a branch to mispredict
+
+
+@njit(cache=True, inline="always")
+def _exp_row(buf: F, shift: Any, count: int, vector: bool) -> None:  # pragma: no cover
+    """``buf[:count] ← e^buf[:count]``: by :func:`pioneer.vecmath.exp32_row` (float32 in SIMD
+    lanes) when ``vector``, else by libm one value at a time (any dtype)."""
+    if vector:
+        exp32_row(buf, shift, count)
+    else:
+        for j in range(count):
+            buf[j] = np.exp(buf[j])
 
 
 @njit(cache=True)
 def _forward(
-    gi: F, h0: F, keep: F, w_t: F, b: F, one: Any, tanh_c: F, hp: F, rz: F, n: F, ghn: F, hs: F
+    gi: F,
+    h0: F,
+    keep: F,
+    w_t: F,
+    b: F,
+    one: Any,
+    tanh_c: F,
+    vector: bool,
+    hp: F,
+    rz: F,
+    n: F,
+    ghn: F,
+    hs: F,
 ) -> None:  # pragma: no cover - compiled
     """Fill ``hs`` (T, B, H) and what the backward pass needs: ``hp`` the state each step
     starts from (after its reset), ``rz`` the gates r, z (T, B, 2H), ``n`` and
     ``ghn = W_hn h + b_hn``. ``w_t`` is W_hhᵀ (H, 3H), contiguous; ``one`` is 1 and ``tanh_c``
-    :func:`_tanh`'s constants in the arrays' dtype (float32 arithmetic stays float32)."""
+    :func:`_tanh_from_exp`'s constants in the arrays' dtype (float32 arithmetic stays
+    float32); ``vector``: the e^x of :mod:`pioneer.vecmath` (float32 only). The gates' e^x
+    are taken a row of a step at a time, so that they can fill SIMD vectors."""
     t_len, batch, h3 = gi.shape
     hidden = h3 // 3
     h = h0.copy()
+    ex = np.empty(2 * hidden, dtype=gi.dtype)  # a row's arguments of e^x, then its values
+    shift = np.empty(2 * hidden, dtype=np.int32)
+    x_n = np.empty(hidden, dtype=gi.dtype)
     for t in range(t_len):
         for i in range(batch):
             k = keep[t, i]
@@ -83,11 +111,19 @@ def _forward(
         gh = np.dot(hp[t], w_t)
         for i in range(batch):
             for j in range(2 * hidden):
-                rz[t, i, j] = one / (one + np.exp(-(gi[t, i, j] + (gh[i, j] + b[j]))))
+                ex[j] = -(gi[t, i, j] + (gh[i, j] + b[j]))
+            _exp_row(ex, shift, 2 * hidden, vector)
+            for j in range(2 * hidden):
+                rz[t, i, j] = one / (one + ex[j])  # σ
             for j in range(hidden):
                 g = gh[i, 2 * hidden + j] + b[2 * hidden + j]
                 ghn[t, i, j] = g
-                v_n = _tanh(gi[t, i, 2 * hidden + j] + rz[t, i, j] * g, one, tanh_c)
+                x = gi[t, i, 2 * hidden + j] + rz[t, i, j] * g
+                x_n[j] = x
+                ex[j] = -(abs(x) + abs(x))
+            _exp_row(ex, shift, hidden, vector)
+            for j in range(hidden):
+                v_n = _tanh_from_exp(x_n[j], ex[j], one, tanh_c)
                 n[t, i, j] = v_n
                 v = v_n + rz[t, i, hidden + j] * (hp[t, i, j] - v_n)  # (1 − z) n + z h
                 hs[t, i, j] = v
@@ -155,6 +191,7 @@ class _GRUSequence(torch.autograd.Function):
             b_hh.detach().numpy(),
             dtype.type(1.0),
             _tanh_constants(dtype),
+            bool(dtype == np.float32),
             hp,
             rz,
             n,
