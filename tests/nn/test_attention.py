@@ -121,3 +121,20 @@ def test_float32_to_rounding_and_repeats_bit_for_bit():
     assert torch.equal(c2, c)
     for g2, g in zip(torch.autograd.grad(c2.sum(), [qkv, s, query]), grads, strict=True):
         assert torch.equal(g2, g)
+
+
+def test_a_backward_after_an_in_place_change_is_refused():
+    """What the backward pass reads is saved as tensors: autograd notices an in-place change."""
+    gen = torch.Generator().manual_seed(8)
+    qkv, s = _rand(gen, torch.float32, 4, 3, 6), _rand(gen, torch.float32, 4, 3, 2)
+    mask = torch.ones(4, 3, dtype=torch.bool)
+    out, a = node_attention(qkv * 1.0, s * 1.0, mask, 0.5)
+    a.mul_(2.0)  # the weights the backward pass would use
+    with pytest.raises(RuntimeError, match="modified by an inplace operation"):
+        out.sum().backward()
+    keys = _rand(gen, torch.float32, 4, 3, 2)
+    values = keys * 1.0
+    c, _ = pool_attention(keys, _rand(gen, torch.float32, 4, 2), values, mask, 0.5)
+    values.add_(1.0)
+    with pytest.raises(RuntimeError, match="modified by an inplace operation"):
+        c.sum().backward()

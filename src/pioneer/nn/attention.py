@@ -185,12 +185,17 @@ def _bool(mask: torch.Tensor) -> B:
     return np.ascontiguousarray(mask.numpy(), dtype=np.bool_)
 
 
-def _outputs(ctx: Any, out: F, a: F, saved: tuple[Any, ...]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Keep ``saved`` for the backward pass; return the output and the weights (no gradient)."""
-    ctx.arrays = saved
-    weights = torch.from_numpy(a)
+def _outputs(
+    ctx: Any, out: F, a: F, inputs: tuple[torch.Tensor, ...], sc: Any
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Save ``inputs``, the output and the weights for the backward pass (as tensors, so that
+    autograd refuses a backward after any of them was changed in place); return the output and
+    the weights (no gradient)."""
+    out_t, weights = torch.from_numpy(out), torch.from_numpy(a)
     ctx.mark_non_differentiable(weights)
-    return torch.from_numpy(out), weights
+    ctx.save_for_backward(*inputs, out_t, weights)
+    ctx.scale = sc
+    return out_t, weights
 
 
 class _NodeAttention(torch.autograd.Function):
@@ -198,20 +203,20 @@ class _NodeAttention(torch.autograd.Function):
     def forward(
         ctx: Any, qkv: torch.Tensor, s: torch.Tensor, mask: torch.Tensor, scale: float
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        q, s_np = _np(qkv), _np(s)
+        q = _np(qkv)
         m_len, n, _ = q.shape
-        out, a = np.empty_like(s_np), np.empty((m_len, n, n), q.dtype)
+        out, a = np.empty(s.shape, q.dtype), np.empty((m_len, n, n), q.dtype)
         sc = q.dtype.type(scale)
-        _node_forward(q, s_np, _bool(mask), sc, out, a)
-        return _outputs(ctx, out, a, (q, out, a, sc))
+        _node_forward(q, _np(s), _bool(mask), sc, out, a)
+        return _outputs(ctx, out, a, (qkv,), sc)
 
     @staticmethod
     def backward(
         ctx: Any, dout: torch.Tensor, _da: torch.Tensor | None
     ) -> tuple[torch.Tensor, torch.Tensor, None, None]:
-        q, out, a, sc = ctx.arrays
+        q, out, a = (_np(t) for t in ctx.saved_tensors)
         dqkv, ds = np.empty_like(q), np.empty_like(out)
-        _node_backward(_np(dout), q, out, a, sc, dqkv, ds)
+        _node_backward(_np(dout), q, out, a, ctx.scale, dqkv, ds)
         return torch.from_numpy(dqkv), torch.from_numpy(ds), None, None
 
 
@@ -225,19 +230,19 @@ class _PoolAttention(torch.autograd.Function):
         mask: torch.Tensor,
         scale: float,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        k, q, v = _np(keys), _np(query), _np(values)
+        k, q = _np(keys), _np(query)
         out, a = np.empty_like(q), np.empty(k.shape[:2], k.dtype)
         sc = k.dtype.type(scale)
-        _pool_forward(k, q, v, _bool(mask), sc, out, a)
-        return _outputs(ctx, out, a, (k, q, v, a, sc))
+        _pool_forward(k, q, _np(values), _bool(mask), sc, out, a)
+        return _outputs(ctx, out, a, (keys, query, values), sc)
 
     @staticmethod
     def backward(
         ctx: Any, dout: torch.Tensor, _da: torch.Tensor | None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, None, None]:
-        k, q, v, a, sc = ctx.arrays
+        k, q, v, _, a = (_np(t) for t in ctx.saved_tensors)
         dk, dq, dv = np.empty_like(k), np.empty_like(q), np.empty_like(v)
-        _pool_backward(_np(dout), k, q, v, a, sc, dk, dq, dv)
+        _pool_backward(_np(dout), k, q, v, a, ctx.scale, dk, dq, dv)
         return torch.from_numpy(dk), torch.from_numpy(dq), torch.from_numpy(dv), None, None
 
 
