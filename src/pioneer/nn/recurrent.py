@@ -46,8 +46,9 @@ _TANH_SERIES = (1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0)  # tanh x = x (1 − x²/3 
 
 
 def _tanh_constants(dtype: np.dtype[Any]) -> F:
-    """:func:`_tanh`'s ``c``: the series' coefficients and where it takes over — below 1/8 in
-    float32 (its next term, 62x⁹/2835, is 10⁻⁹ relative there), 2⁻¹⁰ in float64."""
+    """:func:`_tanh_from_exp`'s ``c``: the series' coefficients and where it takes over —
+    below 1/8 in float32 (its next term, 62x⁹/2835, is 10⁻⁹ relative there), 2⁻¹⁰ in
+    float64."""
     return np.array([*_TANH_SERIES, 0.125 if dtype == np.float32 else 2.0**-10], dtype)
 
 
