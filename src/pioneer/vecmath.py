@@ -19,38 +19,11 @@ Users (both through :func:`exp32_row`): the density reward's kernel matrix
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numba import float32, int32, njit
 from numpy.typing import NDArray
 
-__all__ = ["EXP32_CUT", "EXP32_HIGH", "exp32_parts", "exp32_row"]
-
-EXP32_CUT = float32(-86.0)  # at or below: e^x is taken as exactly 0
-EXP32_HIGH = float32(88.0)  # above: clamped
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def exp32_parts(xc: Any) -> tuple[Any, Any]:  # pragma: no cover - compiled
-    """``(p, n)`` with e^xc = p · 2^n for a float32 ``xc`` in [−86, 88]: p = e^r by the
-    polynomial (float32), n (float32, integral) the power of two to add to p's exponent."""
-    log2e = float32(1.4426950408889634)
-    ln2_hi = float32(0.693359375)  # 8 significant bits: n · ln2_hi is exact for |n| < 2^15
-    ln2_lo = float32(-2.12194440e-4)
-    magic = float32(12582912.0)  # 1.5 · 2^23: adding it rounds to the nearest integer
-    one = float32(1.0)
-    c2 = float32(1.0 / 2.0)
-    c3 = float32(1.0 / 6.0)
-    c4 = float32(1.0 / 24.0)
-    c5 = float32(1.0 / 120.0)
-    c6 = float32(1.0 / 720.0)
-    c7 = float32(1.0 / 5040.0)
-    n = (xc * log2e + magic) - magic
-    r = (xc - n * ln2_hi) - n * ln2_lo
-    r2 = r * r  # Estrin's scheme: a short dependency chain pipelines better
-    p = ((one + r) + (c2 + c3 * r) * r2) + ((c4 + c5 * r) + (c6 + c7 * r) * r2) * (r2 * r2)
-    return p, n
+__all__ = ["exp32_row"]
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
@@ -60,13 +33,30 @@ def exp32_row(
     """``buf[:count] ← e^buf[:count]`` in place (float32, contiguous); ``shift`` is scratch of
     at least ``count`` int32 values. Multiply–add pairs may fuse (``contract``, the only
     fast-math flag: deterministic on one machine)."""
+    log2e = float32(1.4426950408889634)
+    ln2_hi = float32(0.693359375)  # 8 significant bits: n · ln2_hi is exact for |n| < 2^15
+    ln2_lo = float32(-2.12194440e-4)
+    magic = float32(12582912.0)  # 1.5 · 2^23: adding it rounds to the nearest integer
+    cut = float32(-86.0)  # at or below: e^x is taken as exactly 0
+    hi = float32(88.0)  # above: clamped
     zero = float32(0.0)
+    one = float32(1.0)
+    c2 = float32(1.0 / 2.0)
+    c3 = float32(1.0 / 6.0)
+    c4 = float32(1.0 / 24.0)
+    c5 = float32(1.0 / 120.0)
+    c6 = float32(1.0 / 720.0)
+    c7 = float32(1.0 / 5040.0)
     for j in range(count):
         x = buf[j]
-        keep = x > EXP32_CUT
-        p, n = exp32_parts(min(max(x, EXP32_CUT), EXP32_HIGH))
+        keep = x > cut
+        xc = min(max(x, cut), hi)
+        n = (xc * log2e + magic) - magic
+        r = (xc - n * ln2_hi) - n * ln2_lo
+        r2 = r * r  # Estrin's scheme: a short dependency chain pipelines better
+        p = ((one + r) + (c2 + c3 * r) * r2) + ((c4 + c5 * r) + (c6 + c7 * r) * r2) * (r2 * r2)
         buf[j] = p if keep else zero
-        shift[j] = (int32(n) << 23) if keep else int32(0)
+        shift[j] = (int32(n) << 23) if keep else int32(0)  # 2^n, added to the exponent bits
     bits = buf.view(np.int32)
     for j in range(count):
         bits[j] += shift[j]

@@ -121,7 +121,8 @@ def _forward(
                 ghn[t, i, j] = g
                 x = gi[t, i, 2 * hidden + j] + rz[t, i, j] * g
                 x_n[j] = x
-                ex[j] = -(abs(x) + abs(x))
+                a = abs(x)
+                ex[j] = -(a + a)
             _exp_row(ex, shift, hidden, vector)
             for j in range(hidden):
                 v_n = _tanh_from_exp(x_n[j], ex[j], one, tanh_c)
