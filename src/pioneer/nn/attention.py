@@ -97,13 +97,17 @@ def _node_forward(qkv: F, s: F, mask: B, scale: Any, out: F, a: F) -> None:  # p
 def _node_backward(
     dout: F, qkv: F, out: F, a: F, scale: Any, dqkv: F, ds: F
 ) -> None:  # pragma: no cover - compiled
-    """Fill ``dqkv`` (M, N, 3E) and ``ds`` (M, N, E) from ``dout`` = ∂L/∂out."""
+    """Fill ``dqkv`` (M, N, 3E) and ``ds`` (M, N, E) from ``dout`` = ∂L/∂out.
+
+    Per sample: first the N × N scores' gradients ``g``, then each output row summed in place
+    once (dq_i over j, dk_j and dv_j over i, each sum in ascending order) — a row is never
+    revisited, so the E-wide loops run in SIMD lanes."""
     m_len, n, e3 = qkv.shape
     e = e3 // 3
     zero = scale - scale
     da = np.empty(n, dtype=qkv.dtype)
+    g = np.empty((n, n), dtype=qkv.dtype)
     for m in range(m_len):
-        dqkv[m] = 0.0
         for i in range(n):  # through relu and the mask: out > 0 exactly where both pass
             for c in range(e):
                 ds[m, i, c] = dout[m, i, c] if out[m, i, c] > zero else zero
@@ -116,14 +120,26 @@ def _node_backward(
                 da[j] = d
                 row += a[m, i, j] * d
             for j in range(n):
+                g[i, j] = a[m, i, j] * (da[j] - row) * scale  # ∂L/∂(q_i · k_j)
+        for i in range(n):  # dq_i = Σ_j g_ij k_j
+            for c in range(e):
+                dqkv[m, i, c] = zero
+            for j in range(n):
+                if a[m, i, j] != zero:
+                    w = g[i, j]
+                    for c in range(e):
+                        dqkv[m, i, c] += w * qkv[m, j, e + c]
+        for j in range(n):  # dk_j = Σ_i g_ij q_i, dv_j = Σ_i A_ij ds_i
+            for c in range(e):
+                dqkv[m, j, e + c] = zero
+                dqkv[m, j, 2 * e + c] = zero
+            for i in range(n):
                 w = a[m, i, j]
-                if w == zero:
-                    continue
-                g = w * (da[j] - row) * scale  # ∂L/∂(q_i · k_j)
-                for c in range(e):
-                    dqkv[m, i, c] += g * qkv[m, j, e + c]
-                    dqkv[m, j, e + c] += g * qkv[m, i, c]
-                    dqkv[m, j, 2 * e + c] += w * ds[m, i, c]
+                if w != zero:
+                    gw = g[i, j]
+                    for c in range(e):
+                        dqkv[m, j, e + c] += gw * qkv[m, i, c]
+                        dqkv[m, j, 2 * e + c] += w * ds[m, i, c]
 
 
 @njit(cache=True, fastmath={"reassoc"})
