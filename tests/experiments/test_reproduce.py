@@ -133,6 +133,21 @@ def test_the_expected_time_is_announced_before_the_work(tmp_path, capsys, monkey
         f"expected ≈ {paper + extra + fixed:.0f} min (the paper's rows {paper:.0f}, the extra "
         f"rows {extra:.0f}, start-up{compiling} and report {fixed:.0f}) with 2 worker(s)"
     ) in line
+    # the machine the times come from, by name (not "the reference machine": another host)
+    assert (
+        f"the one these times were measured on ({times.machine_short()}, {times.measured}" in line
+    )
+
+
+def test_the_announced_machine_is_named_without_its_feature_list():
+    from pioneer.experiments.reproduce import EpisodeTimes
+
+    def named(machine: str) -> str:
+        return EpisodeTimes({}, 0.1, 0.0, 0.0, "2026-01-01", machine).machine_short()
+
+    assert named("AMD EPYC (znver4: sse4.2+avx+avx2), 2 CPUs, Linux-6") == "AMD EPYC (znver4)"
+    assert named("Intel Xeon, 2 CPUs") == "Intel Xeon"
+    assert named("") == "unknown"
 
 
 def test_a_short_run_is_announced_in_tenths_of_a_minute(tmp_path, capsys, monkeypatch):

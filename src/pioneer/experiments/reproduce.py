@@ -82,10 +82,10 @@ EPISODE_TIMES_FORMAT = "pioneer.episode-times/1"
 
 @dataclasses.dataclass(frozen=True)
 class EpisodeTimes:
-    """What a run costs on the reference machine (docs/performance.md), measured and stored in
-    ``src/pioneer/data/episode_times.json`` by ``benchmarks/episode_times.py`` from a finished
-    paper-profile run. Only for the expected time that ``reproduce`` announces before it
-    starts."""
+    """What a run costs on the machine it was measured on (``machine``; docs/performance.md),
+    stored in ``src/pioneer/data/episode_times.json`` by ``benchmarks/episode_times.py`` from
+    a finished paper-profile run. Only for the expected time that ``reproduce`` announces
+    before it starts."""
 
     episode_s: Mapping[str, float]  # [s] mean wall time of one episode per policy, one worker
     default_episode_s: float  # [s] a policy not listed
@@ -101,6 +101,14 @@ class EpisodeTimes:
         DAgger seeds cost what its seed 0 costs)."""
         name = row.rsplit("-s", 1)[0] if row.rsplit("-s", 1)[-1].isdigit() else row
         return float(self.episode_s.get(row, self.episode_s.get(name, self.default_episode_s)))
+
+    def machine_short(self) -> str:
+        """The CPU the times were measured on, without its feature list (``"AMD EPYC
+        (znver4)"`` of ``"AMD EPYC (znver4: sse4.2+…), 2 CPUs, Linux…"``)."""
+        head = self.machine.split(",")[0].strip()
+        if "(" in head and ":" in head:
+            head = head.split(":")[0] + ")"
+        return head or "unknown"
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (the keys :func:`load_episode_times` reads)."""
@@ -164,7 +172,7 @@ def episode_times() -> EpisodeTimes:
 
 def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -> float:
     """The expected wall time [s] of ``episodes_per_row`` episodes of each policy row on
-    ``workers`` cores like the reference machine's (:func:`episode_times`)."""
+    ``workers`` cores like those :func:`episode_times` was measured on."""
     times = episode_times()
     cpu = sum(times.of(row) for row in rows) * episodes_per_row
     return cpu / max(workers, 1)
@@ -367,8 +375,9 @@ def _announce(
         f"pioneer reproduce --profile {profile}: {total:,} episodes ({done:,} done), expected "
         f"≈ {minutes(total_s)} min (the paper's rows {minutes(paper)}, the extra rows "
         f"{minutes(extra)}, start-up{', compiling the kernels' if cold else ''} and report "
-        f"{minutes(fixed)}) with {n_workers} worker(s) on a machine like the reference 2-core "
-        f"VM (measured {times.measured}, docs/performance.md)",
+        f"{minutes(fixed)}) with {n_workers} worker(s) on a 2-core machine like the one these "
+        f"times were measured on ({times.machine_short()}, {times.measured}; a slower CPU "
+        f"takes longer: docs/performance.md)",
         file=sys.stderr,
         flush=True,
     )
