@@ -104,7 +104,9 @@ class EpisodeTimes:
 
     def machine_short(self) -> str:
         """The CPU the times were measured on, without its feature list (``"AMD EPYC
-        (znver4)"`` of ``"AMD EPYC (znver4: sse4.2+…), 2 CPUs, Linux…"``)."""
+        (znver4)"`` of ``"AMD EPYC (znver4: sse4.2+…), 2 CPUs, Linux…"``, the form
+        ``benchmarks/episode_times.py``'s ``machine_line`` writes; any other text up to its
+        first comma)."""
         head = self.machine.split(",")[0].strip()
         if "(" in head and ":" in head:
             head = head.split(":")[0] + ")"
