@@ -60,7 +60,9 @@ __all__ = [
     "LidarConfig",
     "ScanReading",
     "UnseenRule",
+    "apply_mirror",
     "beam_angles",
+    "mirror_map",
     "mirror_observation",
     "observation_from_beams",
     "observation_from_scan",
@@ -351,14 +353,12 @@ def observation_from_beams(
     return _observation_one(b, math.atan2(g[1], g[0]), cfg)
 
 
-def mirror_observation(
-    obs: NDArray[np.floating], cfg: LidarConfig | None = None
-) -> NDArray[np.float32]:
-    """The observation of the mirror-image state (the world mirrored x → −x), ``(..., D)``:
-    sector k becomes sector (K − k) mod K, the distances stay and every angle φ becomes −φ
-    (wrapped to (−π, π]). Exact for the centred layout with an odd group size, where
-    observation(mirror(state)) = mirror_observation(observation(state)) up to the order of
-    two equally near beams."""
+def mirror_map(cfg: LidarConfig | None = None) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
+    """The mirror image (the world mirrored x → −x) of an observation as a gather and a sign:
+    ``index (D,)`` and ``sign (D,)`` with mirror(o) = o[..., index] · sign, then every angle
+    equal to −π read as π (:func:`mirror_observation`). Sector k comes from sector
+    (K − k) mod K, the distances keep their sign and every angle φ becomes −φ. Exact for the
+    centred layout with an odd group size (refused otherwise)."""
     cfg = cfg or LidarConfig()
     if cfg.sector_layout != "centred" or cfg.group_size % 2 == 0:
         raise ConfigError(
@@ -369,15 +369,38 @@ def mirror_observation(
                 "mirror only observations of the centred layout (the default)",
             )
         )
+    k_count, b = cfg.n_sectors, cfg.n_nearest
+    index = np.arange(cfg.obs_dim, dtype=np.intp)
+    index[:k_count] = (-np.arange(k_count)) % k_count
+    sign = np.ones(cfg.obs_dim, dtype=np.float32)
+    sign[k_count + b :] = -1.0
+    return index, sign
+
+
+def mirror_observation(
+    obs: NDArray[np.floating], cfg: LidarConfig | None = None
+) -> NDArray[np.float32]:
+    """The observation of the mirror-image state (the world mirrored x → −x), ``(..., D)``:
+    sector k becomes sector (K − k) mod K, the distances stay and every angle φ becomes −φ
+    (wrapped to (−π, π]) — :func:`mirror_map`. Exact for the centred layout with an odd group
+    size, where observation(mirror(state)) = mirror_observation(observation(state)) up to the
+    order of two equally near beams."""
+    cfg = cfg or LidarConfig()
+    index, sign = mirror_map(cfg)
     o = np.asarray(obs, dtype=np.float32)
     if o.shape[-1] != cfg.obs_dim:
         raise DataError(expect("observations", f"shape (..., {cfg.obs_dim})", o.shape, "fix it"))
-    k_count, b = cfg.n_sectors, cfg.n_nearest
-    out = o.copy()
-    out[..., :k_count] = o[..., (-np.arange(k_count)) % k_count]
-    neg = -o[..., k_count + b :]  # float32 negation is exact; (−π, π] maps onto itself …
-    out[..., k_count + b :] = np.where(neg <= -np.float32(math.pi), -neg, neg)  # … with π ↦ π
-    return out
+    return apply_mirror(o, index, sign)
+
+
+def apply_mirror(
+    x: NDArray[np.floating], index: NDArray[np.intp], sign: NDArray[np.float32]
+) -> NDArray[np.float32]:
+    """``x (..., D)`` gathered by ``index`` and multiplied by ``sign`` (a :func:`mirror_map`),
+    every value at or below −π read as π: float32 negation is exact, and (−π, π] maps onto
+    itself with π ↦ π. (No distance or speed of an observation is ever that negative.)"""
+    out: NDArray[np.float32] = np.asarray(x, dtype=np.float32)[..., index] * sign
+    return np.where(out <= -np.float32(math.pi), -out, out)
 
 
 def observation_from_scan(

@@ -23,7 +23,16 @@ from numpy.typing import NDArray
 from pioneer.config import default
 from pioneer.errors import ConfigError, expect
 
-__all__ = ["ACTION_MODES", "ActionMode", "mixture_action", "mixture_uncertainty", "softmax"]
+__all__ = [
+    "ACTION_MODES",
+    "MIRROR_ACTION",
+    "ActionMode",
+    "log_softmax",
+    "mixture_action",
+    "mixture_uncertainty",
+    "softmax",
+    "symmetric_mixture",
+]
 
 ActionMode = Literal["mode", "mean"]  # the MDN's deterministic action: the mixture's mode or mean
 ACTION_MODES: tuple[str, ...] = typing.get_args(ActionMode)
@@ -73,3 +82,31 @@ def mixture_action(
         return mean
     fix = f"use {default(mixture_action, 'mode')!r}"
     raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))
+
+
+MIRROR_ACTION = np.array([1.0, -1.0], dtype=np.float32)  # (v, ω) → (v, −ω): the mirrored command
+
+
+def log_softmax(logits: NDArray[np.floating]) -> NDArray[np.float32]:
+    """log softmax over the last axis, float32 (as :func:`torch.log_softmax`)."""
+    z = np.asarray(logits, dtype=np.float32)
+    z = z - z.max(axis=-1, keepdims=True)
+    out: NDArray[np.float32] = z - np.log(np.exp(z).sum(axis=-1, keepdims=True))
+    return out
+
+
+def symmetric_mixture(
+    own: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]],
+    mirrored: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]],
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+    """The mirror-equivariant mixture ½ p(u | x) + ½ p(m(u) | M x) of a network's mixture
+    ``own`` of the inputs x and ``mirrored``, its mixture of their mirror image M x, with
+    m(v, ω) = (v, −ω): ``(logits (N, 2K), mu (N, 2K, 2), sigma (N, 2K, 2))``, the first K
+    components x's, the last K M x's with ω negated. Its logits are the halves' log-weights,
+    so a mirrored input swaps the halves and mirrors every mean: the command of M x is the
+    mirrored command of x, and the uncertainty is the same. Torch twin:
+    :func:`pioneer.learn.models.symmetrise_mixture`."""
+    (lo, mo, so), (lm, mm, sm) = own, mirrored
+    logits = np.concatenate([log_softmax(lo), log_softmax(lm)], axis=-1)
+    mu = np.concatenate([mo, mm * MIRROR_ACTION], axis=-2)
+    return logits, mu, np.concatenate([so, sm], axis=-2)

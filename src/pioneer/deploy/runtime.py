@@ -87,6 +87,7 @@ from pioneer.laser import (
     LidarConfig,
     ScanReading,
     UnseenRule,
+    mirror_map,
     observation_from_beams,
     read_scan,
 )
@@ -167,6 +168,32 @@ class StudentInputs:
         return obs_dim * (2 if self.previous_observation else 1) + (
             2 if self.previous_command else 0
         )
+
+    def mirror_map(self, obs_dim: int) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
+        """The mirror image (world mirrored x → −x) of this student's inputs as a gather and a
+        sign, ``index (width,)`` and ``sign (width,)``: o_t and o_{t−1} as
+        :func:`pioneer.laser.mirror_map`, u_{t−1} = (v, ω) → (v, −ω). An ``obs_dim`` other than
+        the LiDAR's observation width has no mirror (refused)."""
+        lidar = LidarConfig()
+        if obs_dim != lidar.obs_dim:
+            raise ConfigError(
+                expect(
+                    "a mirror-true observation",
+                    f"the LiDAR's {lidar.obs_dim}-D observation",
+                    obs_dim,
+                    "mirror only students of the default observation",
+                )
+            )
+        one, one_sign = mirror_map(lidar)
+        index, sign = [one], [one_sign]
+        if self.previous_observation:
+            index.append(one + obs_dim)
+            sign.append(one_sign)
+        if self.previous_command:
+            start = obs_dim * (2 if self.previous_observation else 1)
+            index.append(np.array([start, start + 1], dtype=np.intp))
+            sign.append(np.array([1.0, -1.0], dtype=np.float32))
+        return np.concatenate(index), np.concatenate(sign)
 
     def stack(
         self,

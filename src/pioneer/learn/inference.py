@@ -19,6 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 from torch import nn
 
+from pioneer.deploy.mixture import MIRROR_ACTION, symmetric_mixture
+from pioneer.laser import apply_mirror
 from pioneer.learn.models import ACTION_DIM, MDN, Student
 
 __all__ = ["StudentInference"]
@@ -53,6 +55,9 @@ class StudentInference:
         def linear(name: str) -> tuple[F32, F32]:
             return np.ascontiguousarray(state[f"{name}.weight"].T), state[f"{name}.bias"].copy()
 
+        self._mirror = (
+            model.config.inputs.mirror_map(model.config.obs_dim) if model.config.symmetric else None
+        )
         if isinstance(model, MDN):
             self._heads = [linear("logits_head"), linear("mu_head"), linear("sigma_head")]
         else:
@@ -65,7 +70,13 @@ class StudentInference:
         return h
 
     def mixture(self, x: F32) -> tuple[F32, F32, F32]:
-        """An MDN's mixture of inputs ``x (N, input_dim)``, in physical units."""
+        """An MDN's mixture of inputs ``x (N, input_dim)``, in physical units (a symmetric
+        student's 2K components: :func:`pioneer.deploy.mixture.symmetric_mixture`)."""
+        if self._mirror is None:
+            return self._mixture(x)
+        return symmetric_mixture(self._mixture(x), self._mixture(apply_mirror(x, *self._mirror)))
+
+    def _mixture(self, x: F32) -> tuple[F32, F32, F32]:
         h = self._features(x)
         (wl, bl), (wm, bm), (ws, bs) = self._heads
         shape = (-1, self.config.n_components, ACTION_DIM)
@@ -75,7 +86,15 @@ class StudentInference:
         return logits, mu, sigma + np.float32(self.config.sigma_floor)
 
     def regress(self, x: F32) -> F32:
-        """An MLP student's command ``(N, 2)`` of inputs ``x (N, input_dim)``."""
+        """An MLP student's command ``(N, 2)`` of inputs ``x (N, input_dim)`` (a symmetric
+        student's: the mean of f(x) and the mirrored f(M x))."""
+        if self._mirror is None:
+            return self._regress(x)
+        mirrored = self._regress(apply_mirror(x, *self._mirror)) * MIRROR_ACTION
+        out: F32 = np.float32(0.5) * (self._regress(x) + mirrored)
+        return out
+
+    def _regress(self, x: F32) -> F32:
         (w, b) = self._heads[0]
         out: F32 = (self._features(x) @ w + b) * self._act_std + self._act_mean
         return out

@@ -23,6 +23,11 @@ Choices and deviations from the paper:
   (ICLR 2022): each frame's NLL weighted by its detached total variance^β (standardised
   units, weights scaled to mean 1). Measured in docs/student.md; not used by the shipped MDNs.
 - The MLP's MSE is taken on standardised actions so that v and ω weigh equally.
+- ``symmetric`` (beyond the paper, off by default): the student is mirror-equivariant by
+  construction — the network runs on the inputs and on their mirror image
+  (:meth:`pioneer.deploy.runtime.StudentInputs.mirror_map`) and the two are combined
+  (:func:`symmetrise_mixture`: the MDN's 2K-component mixture; the MLP's mean), so HL-RR is
+  HR-RL seen in a mirror and a student of many worlds spends no capacity on the side.
 - Randomness: weights are initialised from a ``torch.Generator`` seeded by ``seed``; training
   shuffles with its own generator and runs dropout under a forked, seeded torch RNG, so neither
   the global numpy RNG nor the caller's torch RNG state is used or changed.
@@ -46,7 +51,13 @@ from torch import nn
 
 from pioneer.bounds import Count, NonNegative, UnitInterval
 from pioneer.config import Config, default
-from pioneer.deploy.mixture import ACTION_MODES, ActionMode, mixture_action, mixture_uncertainty
+from pioneer.deploy.mixture import (
+    ACTION_MODES,
+    MIRROR_ACTION,
+    ActionMode,
+    mixture_action,
+    mixture_uncertainty,
+)
 from pioneer.deploy.runtime import StudentInputs
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
@@ -67,6 +78,7 @@ __all__ = [
     "read_checkpoint_meta",
     "save_student",
     "select_action",
+    "symmetrise_mixture",
     "train_student",
     "uncertainty",
 ]
@@ -97,6 +109,11 @@ class StudentConfig(Config):
     # besides o_t.
     previous_observation: bool = False  # also the previous step's observation o_{t−1}
     previous_command: bool = False  # also u_{t−1}, the command sent at the previous step
+    # Beyond the paper: mirror-equivariant by construction — the policy of the inputs x is
+    # ½ p(u | x) + ½ p(m(u) | M x) (MDN; the MLP averages f(x) and m(f(M x))), M the world
+    # mirrored x → −x and m(v, ω) = (v, −ω), so its command for a mirrored observation is the
+    # mirrored command (docs/student.md, "Symmetry built in")
+    symmetric: bool = False
 
     @property
     def inputs(self) -> StudentInputs:
@@ -144,6 +161,20 @@ def select_action(logits: torch.Tensor, mu: torch.Tensor, mode: str = "mode") ->
     raise ConfigError(expect("action_mode", f"one of {ACTION_MODES}", mode, fix))
 
 
+def symmetrise_mixture(
+    own: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+    mirrored: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The mirror-equivariant mixture ½ p(u | x) + ½ p(m(u) | M x) from the network's mixture
+    of the inputs (``own``) and of their mirror image (``mirrored``): ``(logits (N, 2K),
+    mu (N, 2K, 2), sigma (N, 2K, 2))``. NumPy twin (the formula's statement):
+    :func:`pioneer.deploy.mixture.symmetric_mixture`."""
+    (lo, mo, so), (lm, mm, sm) = own, mirrored
+    flip = torch.as_tensor(MIRROR_ACTION)
+    logits = torch.cat([torch.log_softmax(lo, dim=-1), torch.log_softmax(lm, dim=-1)], dim=-1)
+    return logits, torch.cat([mo, mm * flip], dim=-2), torch.cat([so, sm], dim=-2)
+
+
 # ---------------------------------------------------------------------------------- networks
 class Student(nn.Module):
     """Common base: the ReLU/dropout trunk and the normalisation buffers.
@@ -157,6 +188,8 @@ class Student(nn.Module):
     obs_std: torch.Tensor
     act_mean: torch.Tensor
     act_std: torch.Tensor
+    mirror_index: torch.Tensor  # (input_dim,) with config.symmetric: the mirror's gather …
+    mirror_sign: torch.Tensor  # (input_dim,) … and sign (StudentInputs.mirror_map)
 
     def __init__(self, config: StudentConfig, gen: torch.Generator) -> None:
         super().__init__()
@@ -171,7 +204,17 @@ class Student(nn.Module):
         self.register_buffer("obs_std", torch.ones(config.input_dim))
         self.register_buffer("act_mean", torch.zeros(ACTION_DIM))
         self.register_buffer("act_std", torch.ones(ACTION_DIM))
+        if config.symmetric:  # the inputs' mirror image; not saved: the config rebuilds it
+            index, sign = config.inputs.mirror_map(config.obs_dim)
+            self.register_buffer("mirror_index", torch.as_tensor(index), persistent=False)
+            self.register_buffer("mirror_sign", torch.as_tensor(sign), persistent=False)
         self.eval()
+
+    def mirror(self, obs: torch.Tensor) -> torch.Tensor:
+        """The mirror image of raw inputs ``(N, input_dim)`` (the world mirrored x → −x;
+        :func:`pioneer.laser.apply_mirror`, here in torch so that it exports to ONNX)."""
+        out = obs.index_select(1, self.mirror_index) * self.mirror_sign
+        return torch.where(out <= -math.pi, -out, out)
 
     @property
     def kind(self) -> str:
@@ -224,6 +267,11 @@ class MDN(Student):
         self.sigma_head = seeded_linear(h, k * ACTION_DIM, gen)
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        if self.config.symmetric:
+            return symmetrise_mixture(self._mixture(obs), self._mixture(self.mirror(obs)))
+        return self._mixture(obs)
+
+    def _mixture(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         h = self.features(obs)
         shape = (-1, self.config.n_components, ACTION_DIM)
         logits = self.logits_head(h)
@@ -279,6 +327,12 @@ class MLPStudent(Student):
         self.head = seeded_linear(cfg.hidden[-1], ACTION_DIM, gen)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        out = self._regress(obs)
+        if self.config.symmetric:
+            out = 0.5 * (out + self._regress(self.mirror(obs)) * torch.as_tensor(MIRROR_ACTION))
+        return out
+
+    def _regress(self, obs: torch.Tensor) -> torch.Tensor:
         out: torch.Tensor = self.head(self.features(obs)) * self.act_std + self.act_mean
         return out
 
