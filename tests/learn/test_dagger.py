@@ -32,7 +32,8 @@ from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
-from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set
+from pioneer.learn.collect import TARGET_CANDIDATES
+from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set, score_weights
 from pioneer.learn.models import StudentConfig
 from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
 from pioneer.sim.scenarios import ScenarioConfig, StaticStudyLayout, static_study_scenario
@@ -60,6 +61,8 @@ TINY_CFG = DaggerConfig(
 )
 EPISODE_KEYS = {
     "obs",
+    "target_commands",
+    "target_scores",
     "action",
     "applied",
     "gap",
@@ -301,6 +304,14 @@ def test_episode_files_hold_labelled_frames(run_mdn):
         for key in ("gap", "aleatoric", "epistemic"):
             assert ep[key].shape == (n,)
         assert str(ep["event"]) in {"success", "collision", "timeout"}
+        k = TARGET_CANDIDATES
+        assert ep["target_commands"].shape == (n, k, 2) and ep["target_scores"].shape == (n, k)
+        # the best candidate, smoothed as the teacher sends it, is the label itself
+        np.testing.assert_allclose(ep["target_commands"][:, 0], ep["action"], atol=1e-6)
+        finite = np.isfinite(ep["target_scores"])
+        assert finite[:, 0].all() and np.all(np.diff(finite.astype(int), axis=1) <= 0)
+        s = np.where(finite, ep["target_scores"], -np.inf)
+        assert np.all(np.diff(s, axis=1)[finite[:, 1:]] <= 0)  # best first
         assert float(ep["time_s"]) == pytest.approx(0.1 * n)
         assert int(ep["env_seed"]) == dagger_seed(TINY, 0, rnd, i)
         if rnd == 0:  # the teacher drives: no student uncertainty
@@ -574,8 +585,8 @@ def test_mirror_trains_every_frame_also_as_its_mirror_image():
     ]
     plain = dagger._Students(TINY_CFG.replace(student=student), {})
     mirrored = dagger._Students(TINY_CFG.replace(student=student, mirror=True), {})
-    x, y, repeat = plain.aggregate(episodes)
-    xm, ym, repeat_m = mirrored.aggregate(episodes)
+    x, y, repeat, _ = plain.aggregate(episodes)
+    xm, ym, repeat_m, _ = mirrored.aggregate(episodes)
     n = x.shape[0]
     assert xm.shape == (2 * n, x.shape[1]) and ym.shape == (2 * n, 2)
     np.testing.assert_array_equal(xm[:n], x)
@@ -912,3 +923,55 @@ def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
     sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
     assert sel.chosen == 2 and sel.selection[2]["collision_rate"] == 0.0
     assert [r["success_rate"] for r in sel.selection] == [1.0, 0.5, 1.0]
+
+
+# ------------------------------------------------------------------------------ score targets
+def test_score_weights_are_a_softmax_that_ignores_what_could_not_be_chosen():
+    scores = np.array([[2.0, 1.9, 1.5, -np.inf], [0.0, -np.inf, -np.inf, -np.inf]])
+    w = score_weights(scores, 0.1)
+    e = np.exp(np.array([0.0, -1.0, -5.0]))
+    np.testing.assert_allclose(w[0, :3], e / e.sum(), rtol=1e-6)
+    assert w[0, 3] == 0.0 and w[1].tolist() == [1.0, 0.0, 0.0, 0.0]
+    np.testing.assert_array_equal(score_weights(scores, 1e-4)[0], [1.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("kind", ["mdn", "mlp"])
+def test_one_target_of_weight_one_is_the_label_loss(kind):
+    rng = np.random.default_rng(2)
+    model = MDN(seed=1) if kind == "mdn" else MLPStudent(seed=1)
+    x = torch.as_tensor(rng.uniform(0, 3, (32, 29)).astype(np.float32))
+    y = torch.as_tensor(rng.uniform(-0.5, 0.5, (32, 2)).astype(np.float32))
+    with torch.no_grad():
+        one = model.target_loss(x, y[:, None, :], torch.ones(32, 1))
+        assert float(one) == pytest.approx(float(model.loss(x, y)), rel=1e-6)
+        # two targets: the weighted sum of the two losses, frame by frame
+        y2 = torch.flip(y, dims=[0])
+        w = torch.as_tensor(rng.uniform(0, 1, (32, 1)).astype(np.float32))
+        both = model.target_loss(x, torch.stack([y, y2], 1), torch.cat([w, 1 - w], 1))
+        if kind == "mdn":
+            want = -(w[:, 0] * model.log_prob(x, y) + (1 - w[:, 0]) * model.log_prob(x, y2))
+        else:
+            e1 = (((model(x) - y) / model.act_std) ** 2).mean(-1)
+            e2 = (((model(x) - y2) / model.act_std) ** 2).mean(-1)
+            want = w[:, 0] * e1 + (1 - w[:, 0]) * e2
+        assert float(both) == pytest.approx(float(want.mean()), rel=1e-5)
+
+
+def test_scores_target_trains_on_the_teachers_candidates(tmp_path):
+    """A run with ``target="scores"`` aggregates each frame's best candidates with weights
+    that sum to 1, and its loss is the weighted one."""
+    cfg = TINY_CFG.replace(target="scores", score_temperature=0.05)
+    real = reward_default.default_reward
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(reward_default, "default_reward", lambda scenario: real("static"))
+        res = run_dagger(cfg, tmp_path / "scores", workers=1, progress=False)
+    eps = list(_episodes(res.out).values())
+    method = dagger._Students(cfg, {})
+    x, y, _, targets = method.aggregate(eps)
+    assert targets is not None
+    commands, weights = targets
+    assert commands.shape == (len(x), TARGET_CANDIDATES, 2)
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=1e-5)
+    np.testing.assert_allclose(commands[:, 0], y, atol=1e-6)
+    meta = read_checkpoint_meta(res.student)
+    assert meta["info"]["dagger"]["target"] == "scores"

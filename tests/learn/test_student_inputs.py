@@ -80,16 +80,16 @@ def test_dagger_aggregates_each_episodes_own_history():
         for n in (3, 2)
     ]
     cfg = DaggerConfig(student=StudentConfig(previous_command=True))
-    x, y, repeat = Students(cfg, {}).aggregate(eps)
+    x, y, repeat, _ = Students(cfg, {}).aggregate(eps)
     np.testing.assert_array_equal(repeat, 1)
     assert x.shape == (5, 31) and y.shape == (5, 2)
     np.testing.assert_allclose(
         x[:, 29:], [[0, 0], [0, 0.1], [0.2, 0.3], [0, 0], [0, 0.1]], atol=1e-7
     )  # each episode starts from zeros
-    plain, _, _ = Students(DaggerConfig(), {}).aggregate(eps)
+    plain, _, _, _ = Students(DaggerConfig(), {}).aggregate(eps)
     assert plain.shape == (5, 29)
     # near_gap/near_repeat: frames closer than 0.3 m to a person count 4 times
-    _, _, repeat = Students(DaggerConfig(near_gap=0.3, near_repeat=4), {}).aggregate(eps)
+    _, _, repeat, _ = Students(DaggerConfig(near_gap=0.3, near_repeat=4), {}).aggregate(eps)
     np.testing.assert_array_equal(repeat, [4, 1, 1, 4, 1])
 
 

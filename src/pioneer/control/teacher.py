@@ -172,6 +172,16 @@ class TeacherDecision(Decision):
     n_feasible: int
     terms: dict[str, float]  # weighted density / goal / obstacle / extra / total of u*
     raw_terms: dict[str, float]  # unweighted R_den, R_goal, R_obs of u*
+    # (C,) every candidate's score, −∞ where it could not be chosen (infeasible, or outside the
+    # kept soft margins); empty when none was feasible (the fallback's command)
+    scores: F64 = dataclasses.field(default_factory=lambda: np.zeros(0))
+    previous: F64 = dataclasses.field(default_factory=lambda: np.zeros(2))  # u_{t−1} smoothed with
+
+    def smoothed(self, candidates: F64, smoothing: float) -> F64:
+        """The command the teacher would send for each of ``candidates (C, 2)``:
+        α_EMA u + (1 − α_EMA) u_{t−1}, as it sends u* (``command``)."""
+        out: F64 = smoothing * candidates + (1.0 - smoothing) * self.previous
+        return out
 
 
 class LookaheadTeacher:
@@ -225,7 +235,8 @@ class LookaheadTeacher:
             return TeacherDecision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
         i = int(np.argmax(sc.scored))
         best = self.candidates[i]
-        cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * self._prev
+        previous = self._prev.copy()
+        cmd = cfg.smoothing * best + (1.0 - cfg.smoothing) * previous
         self._prev = cmd
         return TeacherDecision(
             command=cmd.copy(),
@@ -242,6 +253,8 @@ class LookaheadTeacher:
                 "goal": float(sc.r_goal[i]),
                 "obstacle": float(sc.r_obs[i]),
             },
+            scores=sc.scored,
+            previous=previous,
         )
 
     def _fallback(self, world: World, state: State, sc: _Scores) -> F64:

@@ -26,6 +26,9 @@ __all__ = [
 ]
 
 _CACHE: dict[tuple[Any, ...], Any] = {}
+# Candidates kept per frame for distilling the teacher's scores (beyond the paper): its best
+# TARGET_CANDIDATES by score, as the commands it would send for them and their scores.
+TARGET_CANDIDATES = 16
 # One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
 # env seed, output path, label_prev, the teacher's soft margins and assumptions.
 CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins", "Assumptions"]
@@ -78,6 +81,7 @@ class _Labelled:
         self.teacher, self.student, self.label_prev = teacher, student, label_prev
         self.name = "dagger"
         self.label = np.zeros(2)
+        self.decision: Any = None
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         self.teacher.reset(info, rng)
@@ -87,7 +91,8 @@ class _Labelled:
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
         state = info["state"]
         prev = state.command[0] if self.label_prev == "applied" else None
-        self.label = self.teacher.decide(info["world"], state, prev=prev).command
+        self.decision = self.teacher.decide(info["world"], state, prev=prev)
+        self.label = self.decision.command
         if self.student is None:
             return np.asarray(self.label, dtype=np.float64)
         return np.asarray(self.student.act(obs, info), dtype=np.float64)
@@ -105,7 +110,9 @@ def collect_episode(
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
     labels), ``applied (T, 2)``, ``gap (T,)`` (surface to surface, at decision time), ``aleatoric``,
-    ``epistemic`` (student's, NaN when the teacher drives) and the episode outcome.
+    ``epistemic`` (student's, NaN when the teacher drives), the episode outcome, and the
+    teacher's best candidates of every step, ``target_commands (T, k, 2)`` and
+    ``target_scores (T, k)`` (:func:`_score_targets`).
     ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`),
     ``assume`` what its predictions assume of people
     (:class:`~pioneer.control.teacher.Assumptions`)."""
@@ -117,11 +124,16 @@ def collect_episode(
     driver = _Labelled(teacher, student, label_prev)
     rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
 
+    rows_tcmd, rows_tscore = [], []
+
     def keep(step: Step) -> None:
         rows_obs.append(np.asarray(step.obs, dtype=np.float32))
         rows_lab.append(driver.label)
         rows_app.append(step.command)
         rows_clear.append(step.info["min_gap"])
+        commands, scores = _score_targets(teacher, driver.decision)
+        rows_tcmd.append(commands)
+        rows_tscore.append(scores)
 
     episode = Episode(NavEnv(scenario), driver, env_seed)
     info = episode.run(keep)
@@ -142,7 +154,26 @@ def collect_episode(
         "time_s": np.array(float(info["time"])),
         "env_seed": np.array(env_seed, dtype=np.int64),
         "scenario": np.array(scenario),
+        "target_commands": np.stack(rows_tcmd).astype(np.float32),
+        "target_scores": np.stack(rows_tscore).astype(np.float32),
     }
+
+
+def _score_targets(teacher: Any, decision: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The teacher's best :data:`TARGET_CANDIDATES` candidates of one decision as the commands
+    it would send for them ``(k, 2)`` and their scores ``(k,)`` (−∞ for a candidate it could
+    not choose); when none was feasible, its fallback command alone (score 0)."""
+    k = TARGET_CANDIDATES
+    commands, scores = np.zeros((k, 2)), np.full(k, -np.inf)
+    if decision.scores.size == 0:
+        commands[0], scores[0] = decision.command, 0.0
+        return commands, scores
+    order = np.argsort(-decision.scores, kind="stable")[:k]
+    commands[: order.size] = decision.smoothed(
+        teacher.candidates[order], teacher.config.smoothing
+    )
+    scores[: order.size] = decision.scores[order]
+    return commands, scores
 
 
 def collect_task(args: CollectTask) -> str:

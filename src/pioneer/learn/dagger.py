@@ -111,6 +111,9 @@ QUANTILES = (0.5, 0.9, 0.95, 0.99)
 
 
 LabelPrev = Literal["applied", "teacher"]
+# What the student learns from each frame: the teacher's command ("label", the paper) or its
+# scores of its best candidates ("scores", beyond the paper: docs/student.md)
+Target = Literal["label", "scores"]
 LABEL_PREV: tuple[str, ...] = typing.get_args(LabelPrev)
 
 
@@ -151,6 +154,11 @@ class DaggerConfig(Config):
     # the observations by pioneer.laser.mirror_observation, ω of the label and of u_{t−1}
     # negated), for a student that drives on both sides of the door
     mirror: bool = False
+    # Beyond the paper: "scores" trains on the teacher's judgement, not only its choice — the
+    # commands it would send for its best candidates, weighted softmax(score / τ) — so the
+    # student learns which commands are nearly as good and which it must not give
+    target: Target = "label"
+    score_temperature: Positive = 0.05  # τ of target="scores" (score units; → 0: the label)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
@@ -324,8 +332,24 @@ def _prepare(
 
 
 # ------------------------------------------------------------------------------ the method
-# inputs, teacher labels, and how often each frame counts in training (near_repeat)
-Data = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.int64]]
+# inputs, teacher labels, how often each frame counts in training (near_repeat) and, with
+# target="scores", the weighted targets: commands (N, k, 2) and weights (N, k)
+Data = tuple[
+    NDArray[np.float32],
+    NDArray[np.float32],
+    NDArray[np.int64],
+    tuple[NDArray[np.float32], NDArray[np.float32]] | None,
+]
+
+
+def score_weights(scores: NDArray[np.floating], temperature: float) -> NDArray[np.float32]:
+    """softmax(score / τ) over each frame's candidates ``(N, k)``; −∞ (a candidate the teacher
+    could not choose) weighs 0. Every frame has at least one finite score (the fallback's)."""
+    z = np.asarray(scores, dtype=np.float64) / temperature
+    z = z - z.max(axis=-1, keepdims=True)
+    e = np.exp(z)
+    out: NDArray[np.float32] = (e / e.sum(axis=-1, keepdims=True)).astype(np.float32)
+    return out
 
 
 def _episode_scenario(cfg: DaggerConfig, names: list[str], rnd: int, i: int) -> str:
@@ -364,12 +388,15 @@ def _mirrored(episode: Mapping[str, Any]) -> dict[str, Any]:
     """The episode of the mirror-image world (x → −x): observations mirrored
     (:func:`pioneer.laser.mirror_observation`), the commands' ω negated, the gaps the same."""
     flip = np.array([1.0, -1.0])
-    return {
+    out = {
         **episode,
         "obs": mirror_observation(np.asarray(episode["obs"])),
         "applied": np.asarray(episode["applied"], dtype=np.float64) * flip,
         "action": np.asarray(episode["action"], dtype=np.float64) * flip,
     }
+    if "target_commands" in episode:  # episodes collected before the scores were kept lack it
+        out["target_commands"] = np.asarray(episode["target_commands"], dtype=np.float64) * flip
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -407,12 +434,21 @@ class _Students:
         gap = np.concatenate([np.asarray(e["gap"], dtype=np.float64) for e in episodes])
         repeat = np.where(gap < cfg.near_gap, cfg.near_repeat, 1).astype(np.int64)
         labels = np.concatenate([e["action"] for e in episodes]).astype(np.float32)
-        return np.concatenate(x), labels, repeat
+        targets = None
+        if cfg.target == "scores":
+            commands = np.concatenate([e["target_commands"] for e in episodes])
+            scores = np.concatenate([e["target_scores"] for e in episodes])
+            targets = commands.astype(np.float32), score_weights(scores, cfg.score_temperature)
+        return np.concatenate(x), labels, repeat, targets
 
     def loss(self, model: Student, data: Data) -> float:
         """``model``'s loss on frames it was not trained on (eval mode: dropout off)."""
+        x, y, _, targets = data
         with torch.inference_mode():
-            return float(model.loss(torch.as_tensor(data[0]), torch.as_tensor(data[1])))
+            if targets is not None:
+                c, w = (torch.as_tensor(a) for a in targets)
+                return float(model.target_loss(torch.as_tensor(x), c, w))
+            return float(model.loss(torch.as_tensor(x), torch.as_tensor(y)))
 
     def fit(self, step: Step[Data, Student]) -> tuple[Student, dict[str, Any]]:
         cfg, rnd = self.cfg, step.round
@@ -421,17 +457,19 @@ class _Students:
         if model is None:
             model = build_student(cfg.student, seed=cfg.seed)
         epochs = cfg.epochs_initial if rnd == 0 else cfg.epochs_per_round
-        x, y, repeat = step.data
+        x, y, repeat, targets = step.data
         x_fit, y_fit = x, y
         if (repeat != 1).any():  # near frames repeated (near_gap, near_repeat)
             x_fit, y_fit = np.repeat(x, repeat, axis=0), np.repeat(y, repeat, axis=0)
+            if targets is not None:
+                targets = (np.repeat(targets[0], repeat, 0), np.repeat(targets[1], repeat, 0))
         history: list[float] = []
         if epochs > 0:
             # The normalisation is fitted once, for the fresh network: re-fitting it under
             # warm-started weights would shift every input and output of a trained network.
             history = train_student(
                 model, x_fit, y_fit, epochs=epochs, batch=cfg.batch, lr=cfg.lr, seed=cfg.seed + rnd,
-                fit_normalizer=fresh,
+                fit_normalizer=fresh, targets=targets,
             )  # fmt: skip
         info = {
             "scenario": cfg.scenario,

@@ -242,6 +242,14 @@ class Student(nn.Module):
         """Mean training loss over the batch (scalar)."""
         raise NotImplementedError
 
+    def target_loss(
+        self, obs: torch.Tensor, commands: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        """Mean training loss against weighted targets — ``commands (N, k, 2)`` with
+        ``weights (N, k)`` summing to 1 per frame (the teacher's scores distilled: DAgger's
+        ``target="scores"``); one target of weight 1 is :meth:`loss`."""
+        raise NotImplementedError
+
     def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
         """The command ``(N, 2)`` (v [m/s], ω [rad/s]) the policy executes."""
         raise NotImplementedError
@@ -281,10 +289,16 @@ class MDN(Student):
 
     def log_prob(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """log p(action | obs) ``(N,)`` under the mixture, via logsumexp (stable)."""
-        logits, mu, sigma = self(obs)
-        z = (actions.unsqueeze(1) - mu) / sigma  # (N, K, 2)
-        comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
-        return torch.logsumexp(torch.log_softmax(logits, dim=-1) + comp, dim=-1)
+        return _mixture_log_prob(*self(obs), actions.unsqueeze(1))[:, 0]
+
+    def target_loss(
+        self, obs: torch.Tensor, commands: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        """−(1/N) Σ_i Σ_j w_ij log p(u_ij | o_i): the cross-entropy of the mixture against the
+        targets' weights (the KL divergence to them up to a constant), so the network learns
+        which commands the teacher rates nearly as good, not only its single choice."""
+        logp = _mixture_log_prob(*self(obs), commands)  # (N, k)
+        return -(weights * logp).sum(dim=-1).mean()
 
     def nll(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Mean negative log-likelihood [nats per sample] of ``actions`` (N, 2) given ``obs``."""
@@ -296,9 +310,7 @@ class MDN(Student):
         if beta == 0.0:
             return self.nll(obs, actions)
         logits, mu, sigma = self(obs)
-        z = (actions.unsqueeze(1) - mu) / sigma
-        comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
-        logp = torch.logsumexp(torch.log_softmax(logits, dim=-1) + comp, dim=-1)
+        logp = _mixture_log_prob(logits, mu, sigma, actions.unsqueeze(1))[:, 0]
         with torch.no_grad():
             ale, epi = uncertainty(logits, mu / self.act_std, sigma / self.act_std)
             w = (ale + epi) ** beta
@@ -341,6 +353,13 @@ class MLPStudent(Student):
         err = (self(obs) - actions) / self.act_std
         return (err * err).mean()
 
+    def target_loss(
+        self, obs: torch.Tensor, commands: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        """The squared error to every target, weighted (its minimum: the weighted mean)."""
+        err = (self(obs).unsqueeze(1) - commands) / self.act_std  # (N, k, 2)
+        return (weights * (err * err).mean(dim=-1)).sum(dim=-1).mean()
+
     def deterministic_action(self, obs: torch.Tensor, mode: str | None = None) -> torch.Tensor:
         """The regressed command ``(N, 2)`` (``mode`` is ignored)."""
         out: torch.Tensor = self(obs)
@@ -348,6 +367,17 @@ class MLPStudent(Student):
 
 
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def _mixture_log_prob(
+    logits: torch.Tensor, mu: torch.Tensor, sigma: torch.Tensor, actions: torch.Tensor
+) -> torch.Tensor:
+    """log p(a | o) ``(N, k)`` of ``actions (N, k, 2)`` under each frame's mixture
+    (``logits (N, K)``, ``mu``/``sigma (N, K, 2)``), via logsumexp (stable)."""
+    mu, sigma = mu.unsqueeze(1), sigma.unsqueeze(1)  # (N, 1, K, 2)
+    z = (actions.unsqueeze(2) - mu) / sigma  # (N, k, K, 2)
+    comp = -0.5 * (z * z).sum(-1) - torch.log(sigma).sum(-1) - ACTION_DIM * _HALF_LOG_2PI
+    return torch.logsumexp(torch.log_softmax(logits, dim=-1).unsqueeze(1) + comp, dim=-1)
 
 
 def build_student(config: StudentConfig | None = None, seed: int = 0) -> MDN | MLPStudent:
@@ -367,6 +397,21 @@ def _as_tensor(x: NDArray[np.floating] | torch.Tensor, name: str, cols: int) -> 
     return t
 
 
+def _as_targets(
+    targets: tuple[NDArray[np.floating], NDArray[np.floating]], n: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    commands = torch.as_tensor(np.asarray(targets[0], dtype=np.float32))
+    weights = torch.as_tensor(np.asarray(targets[1], dtype=np.float32))
+    k = weights.shape[-1] if weights.ndim == 2 else -1
+    if commands.shape != (n, k, ACTION_DIM) or weights.shape != (n, k):
+        got = (tuple(commands.shape), tuple(weights.shape))
+        raise DataError(expect("targets", f"shapes ({n}, k, 2) and ({n}, k)", got, "align them"))
+    ok = torch.isfinite(commands).all() and torch.isfinite(weights).all()
+    if not bool(ok) or bool((weights < 0).any()):
+        raise DataError(expect("targets", "finite commands, weights >= 0", "other", "fix them"))
+    return commands, weights
+
+
 def train_student(
     model: Student,
     obs: NDArray[np.floating] | torch.Tensor,
@@ -377,9 +422,14 @@ def train_student(
     seed: int = 0,
     progress: Callable[[int, float], None] | None = None,
     fit_normalizer: bool = True,
+    targets: tuple[NDArray[np.floating], NDArray[np.floating]] | None = None,
 ) -> list[float]:
     """Fit ``model`` to ``(obs (N, input_dim), actions (N, 2))`` with Adam; returns the mean
     training loss of each epoch (NLL [nats] for the MDN, standardised MSE for the MLP).
+
+    ``targets`` = ``(commands (N, k, 2), weights (N, k))`` trains on weighted targets instead
+    (:meth:`Student.target_loss`: the teacher's scores distilled); ``actions`` still set the
+    output standardisation.
 
     ``fit_normalizer`` first sets the standardisation buffers from this data (DAgger retrains
     on the aggregated set each round, so the scales follow the data). Mini-batches are drawn
@@ -399,6 +449,7 @@ def train_student(
             raise ConfigError(expect(name, "an integer >= 1", value, f"set {name} >= 1"))
     if not (math.isfinite(lr) and lr > 0):
         raise ConfigError(expect("lr", "a finite number > 0", lr, f"use {TRAIN_LR:g}"))
+    target = None if targets is None else _as_targets(targets, x.shape[0])
     if fit_normalizer:
         model.set_normalizer(x, y)
     n = x.shape[0]
@@ -414,7 +465,10 @@ def train_student(
                 total = 0.0
                 for start in range(0, n, batch):
                     idx = perm[start : start + batch]
-                    loss = model.loss(x[idx], y[idx])
+                    if target is None:
+                        loss = model.loss(x[idx], y[idx])
+                    else:
+                        loss = model.target_loss(x[idx], target[0][idx], target[1][idx])
                     opt.zero_grad(set_to_none=True)
                     loss.backward()
                     opt.step()
