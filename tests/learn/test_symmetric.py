@@ -85,7 +85,7 @@ def test_the_inputs_mirror_keeps_their_layout():
 def test_an_observation_without_a_mirror_is_refused():
     with pytest.raises(ConfigError, match="mirror"):
         StudentInputs().mirror_map(OBS + 1)
-    with pytest.raises(ConfigError, match="symmetric|mirror"):
+    with pytest.raises(ConfigError, match=r"symmetric|mirror"):
         build_student(StudentConfig(symmetric=True, obs_dim=OBS + 1))
 
 
@@ -158,9 +158,7 @@ def test_a_symmetric_student_trains_saves_and_exports(kind, tmp_path: Path):
     x_m = mirror_observation(x)
     with torch.no_grad():
         a = loaded.deterministic_action(torch.from_numpy(x)).numpy()
-        np.testing.assert_array_equal(
-            a, model.deterministic_action(torch.from_numpy(x)).numpy()
-        )
+        np.testing.assert_array_equal(a, model.deterministic_action(torch.from_numpy(x)).numpy())
     inference = StudentInference(loaded)
     if kind == "mdn":
         logits, mu, sigma = inference.mixture(x)

@@ -169,9 +169,7 @@ def _score_targets(teacher: Any, decision: Any) -> tuple[NDArray[np.float64], ND
         commands[0], scores[0] = decision.command, 0.0
         return commands, scores
     order = np.argsort(-decision.scores, kind="stable")[:k]
-    commands[: order.size] = decision.smoothed(
-        teacher.candidates[order], teacher.config.smoothing
-    )
+    commands[: order.size] = decision.smoothed(teacher.candidates[order], teacher.config.smoothing)
     scores[: order.size] = decision.scores[order]
     return commands, scores
 

@@ -289,7 +289,8 @@ class MDN(Student):
 
     def log_prob(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """log p(action | obs) ``(N,)`` under the mixture, via logsumexp (stable)."""
-        return _mixture_log_prob(*self(obs), actions.unsqueeze(1))[:, 0]
+        logits, mu, sigma = self(obs)
+        return _mixture_log_prob(logits, mu, sigma, actions.unsqueeze(1))[:, 0]
 
     def target_loss(
         self, obs: torch.Tensor, commands: torch.Tensor, weights: torch.Tensor
@@ -297,7 +298,8 @@ class MDN(Student):
         """−(1/N) Σ_i Σ_j w_ij log p(u_ij | o_i): the cross-entropy of the mixture against the
         targets' weights (the KL divergence to them up to a constant), so the network learns
         which commands the teacher rates nearly as good, not only its single choice."""
-        logp = _mixture_log_prob(*self(obs), commands)  # (N, k)
+        logits, mu, sigma = self(obs)
+        logp = _mixture_log_prob(logits, mu, sigma, commands)  # (N, k)
         return -(weights * logp).sum(dim=-1).mean()
 
     def nll(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
