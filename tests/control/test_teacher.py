@@ -581,3 +581,22 @@ def test_registered_teachers_construct_and_run(name):
                 assert d.terms[k] == 0.0
     if off is None:
         assert any(d.terms["density"] != 0.0 for d in feasible)
+
+
+def test_start_now_decides_as_the_teacher_of_people_who_start_now():
+    # oracle: assuming everyone who has not started walking starts now decides exactly as the
+    # plain teacher does in the state whose delays have all passed
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=3)
+    world, state = info["world"], info["state"]
+    waiting = state.h_delay[0] > state.t[0]
+    assert waiting.any()  # someone has not started yet (the exiting passenger's delay)
+    started = dataclasses.replace(state, h_delay=np.minimum(state.h_delay, state.t[:, None]))
+    assuming = make_teacher("hr-rl", density=False, assume_start_now=True)
+    plain = make_teacher("hr-rl", density=False)
+    assert assuming.config.assume.active
+    np.testing.assert_array_equal(assuming.scores(world, state), plain.scores(world, started))
+    np.testing.assert_array_equal(
+        assuming.decide(world, state).command, plain.decide(world, started).command
+    )
+    assert (state.h_delay[0] > state.t[0]).sum() == waiting.sum()  # the given state unchanged

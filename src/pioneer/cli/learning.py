@@ -50,7 +50,12 @@ __all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
 
 config_flags(DaggerConfig)
 config_flags(SoftMargins, human="human_margin", wall="wall_margin", tiers="margin_tiers")
-config_flags(Assumptions, human_radius="assume_radius", a_robot="assume_a_robot")
+config_flags(
+    Assumptions,
+    human_radius="assume_radius",
+    a_robot="assume_a_robot",
+    start_now="assume_start_now",
+)
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")
 config_flags(WarmStartConfig, expert="bc_expert")

@@ -21,7 +21,8 @@ demonstrator uses it to yield to people leaving the elevator).
 Beyond the paper, for a teacher whose student must drive many worlds (docs/student.md, "Which
 variation costs the student"): ``assume`` replaces, in the teacher's own predictions only,
 what a student cannot read from a scan by one value for every world — every person at least
-``human_radius`` large, every person reacting to the robot with ``a_robot``. The world the
+``human_radius`` large, every person reacting to the robot with ``a_robot``, every person who
+has not started walking starting now (``start_now``: they may at any moment). The world the
 robot drives in is unchanged; where its people already are so, the decisions are the same.
 """
 
@@ -105,6 +106,9 @@ class Assumptions(Config):
     # [m/s²] every person predicted to react to the robot with this A_r (paper eq. 4's robot
     # term), also those that ignore it (None: as they are)
     a_robot: NonNegative | None = None
+    # every person who has not started walking yet predicted to start now: people waiting in
+    # the cabin may walk out at any moment, and when is not in a scan (the imitable teacher)
+    start_now: bool = False
 
     def apply(self, world: World, state: State, cache: dict[str, Any]) -> tuple[World, State]:
         """``world`` and ``state`` as the teacher predicts them (the same objects when nothing
@@ -123,12 +127,14 @@ class Assumptions(Config):
                 )
             world = cache["assumed"]
             state = dataclasses.replace(state, h_reacts=np.ones_like(state.h_reacts))
+        if self.start_now:
+            state = dataclasses.replace(state, h_delay=np.minimum(state.h_delay, state.t[:, None]))
         return world, state
 
     @property
     def active(self) -> bool:
         """Whether anything is assumed."""
-        return self.human_radius > 0.0 or self.a_robot is not None
+        return self.human_radius > 0.0 or self.a_robot is not None or self.start_now
 
 
 @dataclasses.dataclass(frozen=True)
@@ -357,6 +363,7 @@ def make_teacher(
     precision: RolloutPrecision = TeacherConfig.precision,
     assume_radius: float = Assumptions.human_radius,
     assume_a_robot: float | None = Assumptions.a_robot,
+    assume_start_now: bool = Assumptions.start_now,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
@@ -364,8 +371,8 @@ def make_teacher(
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
     (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (fast, the default; float32
     rays; or float64, the reference: :mod:`pioneer.control.precision`); ``assume_radius``
-    [m] and ``assume_a_robot`` [m/s²] what its predictions assume of every person
-    (:class:`Assumptions`; beyond the paper)."""
+    [m], ``assume_a_robot`` [m/s²] and ``assume_start_now`` what its predictions assume of
+    every person (:class:`Assumptions`; beyond the paper)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -380,7 +387,9 @@ def make_teacher(
         precision=precision,
         fallback=fallback,
         margins=SoftMargins(human=human_margin, wall=wall_margin, tiers=margin_tiers),
-        assume=Assumptions(human_radius=assume_radius, a_robot=assume_a_robot),
+        assume=Assumptions(
+            human_radius=assume_radius, a_robot=assume_a_robot, start_now=assume_start_now
+        ),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)

@@ -50,6 +50,7 @@ PARAMETERS_ADDED: dict[str, Any] = {
     "hold": 0,  # the shield's fallback steps after an unsure one (make_shield_policy, 2026-11-27)
     "assume_radius": 0.0,  # what the teacher's predictions assume of people (make_teacher,
     "assume_a_robot": None,  # 2026-11-27): nothing
+    "assume_start_now": False,  # people predicted to start walking now (make_teacher, 2026-11-28)
 }
 
 

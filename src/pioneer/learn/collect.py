@@ -56,6 +56,7 @@ def _teacher(scenario: str, reward: str, margins: SoftMargins, assume: Assumptio
             margin_tiers=margins.tiers,
             assume_radius=assume.human_radius,
             assume_a_robot=assume.a_robot,
+            assume_start_now=assume.start_now,
         )
     return _CACHE[key]
 
