@@ -14,6 +14,7 @@ from pioneer.control.rollout import rollout
 from pioneer.control.teacher import (
     Assumptions,
     LookaheadTeacher,
+    Patience,
     SoftMargins,
     TeacherConfig,
     make_teacher,
@@ -600,3 +601,50 @@ def test_start_now_decides_as_the_teacher_of_people_who_start_now():
         assuming.decide(world, state).command, plain.decide(world, started).command
     )
     assert (state.h_delay[0] > state.t[0]).sum() == waiting.sum()  # the given state unchanged
+
+
+def test_patience_runs_out_after_its_time_without_progress():
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=5)
+    state = info["state"]
+    t = make_teacher("hr-rl", density=False, patience=1.0)
+    assert t.config.patience == Patience(after=1.0)
+    d0 = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
+
+    def at(time: float, dist: float):  # the robot ``dist`` from the goal at ``time``
+        toward = (state.goal[0] - state.robot[0, :2]) / d0
+        robot = state.robot.copy()
+        robot[0, :2] = state.goal[0] - toward * dist
+        return dataclasses.replace(state, robot=robot, t=np.array([time]))
+
+    assert not t.impatient(at(0.0, d0))
+    assert not t.impatient(at(0.9, d0 - 0.04))  # less than `progress` (5 cm): no progress
+    assert t.impatient(at(1.0, d0 - 0.04))  # 1 s since the last progress
+    assert not t.impatient(at(1.1, d0 - 0.1))  # progress: patient again
+    assert t.impatient(at(2.1, d0 + 0.3))  # backwards for 1 s
+    assert not t.impatient(at(0.0, d0))  # an earlier time: a new episode
+    assert not make_teacher("hr-rl", patience=0.0).impatient(at(100.0, d0))
+
+
+def test_an_impatient_teacher_decides_by_the_rule_terms_alone():
+    # oracle: impatient, the teacher decides as the teacher without margins and learned term
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=6)
+    for _ in range(20):
+        _, _, _, _, info = env.step([0.2, 0.0])
+    world, state = info["world"], info["state"]
+    impatient = make_teacher("hr-rl", patience=0.5)
+    impatient._progress = (0.0, float(state.t[0]) - 1.0)  # no progress for 1 s
+    rules = make_teacher("hr-rl", density=False, human_margin=0.0, wall_margin=0.0, patience=0)
+    got, want = impatient.decide(world, state), rules.decide(world, state)
+    np.testing.assert_array_equal(got.command, want.command)
+    np.testing.assert_array_equal(got.scores, want.scores)
+    patient = make_teacher("hr-rl", patience=100.0)
+    assert not np.array_equal(patient.decide(world, state).scores, got.scores)
+
+
+def test_the_papers_teacher_has_no_patience():
+    from pioneer.control.registry import build_policy
+
+    assert build_policy("teacher-paper", "hr-rl").config.patience.after == 0.0
+    assert build_policy("teacher", "hr-rl").config.patience == Patience()

@@ -131,6 +131,7 @@ _BUILTINS = (
         **_TEACHER_PARTS,
         human_margin=0.0,
         wall_margin=0.0,
+        patience=0.0,
         name="teacher-paper",
     ),
     _builtin(

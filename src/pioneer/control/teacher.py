@@ -29,6 +29,7 @@ robot drives in is unchanged; where its people already are so, the decisions are
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping
 from typing import Annotated, Any, Literal, NamedTuple
 
@@ -60,6 +61,7 @@ from pioneer.sim.world import State, World
 __all__ = [
     "Assumptions",
     "LookaheadTeacher",
+    "Patience",
     "SoftMargins",
     "TeacherConfig",
     "TeacherDecision",
@@ -138,6 +140,25 @@ class Assumptions(Config):
 
 
 @dataclasses.dataclass(frozen=True)
+class Patience(Config):
+    """How long the teacher holds to what it prefers beyond the rule terms while it makes no
+    progress: after ``after`` seconds in which its distance to the goal has not shrunk by
+    ``progress``, it chooses among all feasible candidates by the rule terms alone — no soft
+    margins, no learned term — until it makes progress again. The learned term was fitted
+    where people walk 0.5–0.7 m/s and the margins were chosen in the paper world; where people
+    are faster or do not queue, the two together make the teacher wait for a gap that never
+    comes (docs/teacher.md, "Patience")."""
+
+    after: NonNegative = 3.0  # [s] without progress before the teacher gives up its preferences
+    progress: Positive = 0.05  # [m] a shorter distance to the goal by this much is progress
+
+    @property
+    def active(self) -> bool:
+        """Whether the teacher is ever impatient (``after`` > 0)."""
+        return self.after > 0.0
+
+
+@dataclasses.dataclass(frozen=True)
 class TeacherConfig(Config):
     """Candidate set, horizon and smoothing of the lookahead teacher."""
 
@@ -159,6 +180,9 @@ class TeacherConfig(Config):
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Fallback = "evade"
     weights: RuleWeights = RuleWeights()
+    # Beyond the paper: the margins and the learned term given up after a while without
+    # progress (Patience; docs/teacher.md)
+    patience: Patience = Patience()
 
     def candidates(self) -> F64:
         """The candidate commands: every v × ``n_omega`` ω evenly in [−ω_max, ω_max] → (C, 2),
@@ -213,11 +237,25 @@ class LookaheadTeacher:
         self._prev = np.zeros(2)
         self.last: TeacherDecision | None = None
         self._assumed: dict[str, Any] = {}  # the world with the assumed reaction (Assumptions)
+        self._progress = (math.inf, 0.0)  # (best distance to the goal [m], when it was made [s])
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
-        """Forget the previous command."""
+        """Forget the previous command and the progress made."""
         self._prev = np.zeros(2)
         self.last = None
+        self._progress = (math.inf, 0.0)
+
+    def impatient(self, state: State) -> bool:
+        """Note the progress to ``state`` (B = 1) and say whether the teacher has made none for
+        ``patience.after`` seconds (:class:`Patience`). A state earlier than the last progress
+        starts a new episode."""
+        p = self.config.patience
+        d = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
+        t = float(state.t[0])
+        best, since = self._progress
+        if d < best - p.progress or t < since:
+            self._progress = best, since = d, t
+        return p.active and t - since >= p.after - 1e-9
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
         """Decide from the privileged ``info["state"]`` and ``info["world"]``."""
@@ -234,8 +272,9 @@ class LookaheadTeacher:
         cfg = self.config
         if prev is not None:
             self._prev = np.asarray(prev, dtype=np.float64).reshape(2).copy()
+        impatient = self.impatient(state)
         world, state = cfg.assume.apply(world, state, self._assumed)
-        sc = self._score(world, state)
+        sc = self._score(world, state, impatient)
         if sc.n_feasible == 0:
             self._prev = self._fallback(world, state, sc)
             return TeacherDecision(self._prev.copy(), self._prev.copy(), -1, 0, {}, {})
@@ -290,9 +329,11 @@ class LookaheadTeacher:
         world, state = self.config.assume.apply(world, state, self._assumed)
         return self._score(world, state).scored
 
-    def _score(self, world: World, state: State) -> _Scores:
+    def _score(self, world: World, state: State, impatient: bool = False) -> _Scores:
+        """Every candidate's scores; ``impatient``: by the rule terms alone, among all feasible
+        candidates (:class:`Patience`)."""
         cfg = self.config
-        w = cfg.weights
+        w = dataclasses.replace(cfg.weights, use_density=False) if impatient else cfg.weights
         ro = rollout(
             world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model, cfg.precision
         )
@@ -302,7 +343,7 @@ class LookaheadTeacher:
         r_goal = goal_term(d_goal, d_total)
         feasible = ~ro.collided & (ro.min_gap >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
-        chosen = self._preferred(feasible, ro)
+        chosen = feasible if impatient else self._preferred(feasible, ro)
         # Only candidates that can be chosen are observed and scored by the density: about half
         # collide in the paper world, and the rays and the density are most of a decision's
         # arithmetic. (The others keep 0 for both terms; they score −∞.)
@@ -364,6 +405,7 @@ def make_teacher(
     assume_radius: float = Assumptions.human_radius,
     assume_a_robot: float | None = Assumptions.a_robot,
     assume_start_now: bool = Assumptions.start_now,
+    patience: float = Patience.after,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
@@ -372,7 +414,9 @@ def make_teacher(
     (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (fast, the default; float32
     rays; or float64, the reference: :mod:`pioneer.control.precision`); ``assume_radius``
     [m], ``assume_a_robot`` [m/s²] and ``assume_start_now`` what its predictions assume of
-    every person (:class:`Assumptions`; beyond the paper)."""
+    every person (:class:`Assumptions`; beyond the paper); ``patience`` [s] how long it holds
+    to its margins and learned term without progress (:class:`Patience`; 0: always, as the
+    paper's teacher)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -391,5 +435,6 @@ def make_teacher(
             human_radius=assume_radius, a_robot=assume_a_robot, start_now=assume_start_now
         ),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
+        patience=Patience(after=patience),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)

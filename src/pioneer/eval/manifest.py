@@ -51,6 +51,7 @@ PARAMETERS_ADDED: dict[str, Any] = {
     "assume_radius": 0.0,  # what the teacher's predictions assume of people (make_teacher,
     "assume_a_robot": None,  # 2026-11-27): nothing
     "assume_start_now": False,  # people predicted to start walking now (make_teacher, 2026-11-28)
+    "patience": 0.0,  # the teacher's patience (make_teacher, 2026-11-28): none, as before
 }
 
 
