@@ -719,8 +719,10 @@ def test_the_labelling_teacher_makes_its_assumptions(monkeypatch, reward_file, t
     made: list[Assumptions] = []
     real = collect._teacher
 
-    def spy(scenario: str, reward: str, margins: SoftMargins, assumed: Assumptions) -> Any:
-        teacher = real(scenario, reward, margins, assumed)
+    def spy(
+        scenario: str, reward: str, margins: SoftMargins, assumed: Assumptions, patience: Any
+    ) -> Any:
+        teacher = real(scenario, reward, margins, assumed, patience)
         made.append(teacher.config.assume)
         return teacher
 
@@ -975,3 +977,27 @@ def test_scores_target_trains_on_the_teachers_candidates(tmp_path):
     np.testing.assert_allclose(commands[:, 0], y, atol=1e-6)
     meta = read_checkpoint_meta(res.student)
     assert meta["info"]["dagger"]["target"] == "scores"
+
+
+def test_the_labelling_teachers_patience_is_the_runs_and_old_runs_had_none(
+    monkeypatch, reward_file, tmp_path
+):
+    from pioneer.control.teacher import Patience
+    from pioneer.learn import collect
+
+    made: list[Patience] = []
+    real = collect._teacher
+
+    def spy(*args: Any) -> Any:
+        teacher = real(*args)
+        made.append(teacher.config.patience)
+        return teacher
+
+    monkeypatch.setattr(collect, "_teacher", spy)
+    cfg = TINY_CFG.replace(rounds=0, patience=Patience(after=1.5, progress=0.1))
+    run_dagger(cfg, tmp_path / "run", workers=1, reward=reward_file, progress=False)
+    assert made and set(made) == {Patience(after=1.5, progress=0.1)}
+    old = cfg.to_dict()
+    del old["patience"]  # a run folder written before the teacher had patience
+    assert DaggerConfig.from_dict(old).patience == Patience(after=0.0)
+    assert DaggerConfig().patience == Patience()

@@ -31,7 +31,7 @@ from pioneer.cli._common import (
     optional,
     require_some,
 )
-from pioneer.control.teacher import Assumptions, SoftMargins
+from pioneer.control.teacher import Assumptions, Patience, SoftMargins
 from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study
 from pioneer.io import to_json
@@ -56,6 +56,7 @@ config_flags(
     a_robot="assume_a_robot",
     start_now="assume_start_now",
 )
+config_flags(Patience, after="patience", progress="patience_progress")
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")
 config_flags(WarmStartConfig, expert="bc_expert")

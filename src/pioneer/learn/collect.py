@@ -5,6 +5,7 @@ round's student are cached per worker process."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -14,7 +15,7 @@ from numpy.typing import NDArray
 from pioneer.imitation.store import file_version, save_episode
 
 if TYPE_CHECKING:  # the teacher is imported in the worker, when it is first needed
-    from pioneer.control.teacher import Assumptions, SoftMargins
+    from pioneer.control.teacher import Assumptions, Patience, SoftMargins
 
 __all__ = [
     "CollectTask",
@@ -30,8 +31,8 @@ _CACHE: dict[tuple[Any, ...], Any] = {}
 # TARGET_CANDIDATES by score, as the commands it would send for them and their scores.
 TARGET_CANDIDATES = 16
 # One episode's work: scenario, reward file, student checkpoint (None: the teacher drives),
-# env seed, output path, label_prev, the teacher's soft margins and assumptions.
-CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins", "Assumptions"]
+# env seed, output path, label_prev, the teacher's soft margins, assumptions and patience.
+CollectTask = tuple[str, str, str | None, int, str, str, "SoftMargins", "Assumptions", "Patience"]
 # One episode a student drives alone: index, scenario, student checkpoint, env seed.
 DriveTask = tuple[int, str, str, int]
 
@@ -41,10 +42,12 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _teacher(scenario: str, reward: str, margins: SoftMargins, assume: Assumptions) -> Any:
+def _teacher(
+    scenario: str, reward: str, margins: SoftMargins, assume: Assumptions, patience: Patience
+) -> Any:
     # One teacher per reward file: it plans from the privileged state and world of each step,
     # so the variants of a layout distribution that share a reward share the teacher.
-    key = ("teacher", reward, margins, assume)
+    key = ("teacher", reward, margins, assume, patience)
     if key not in _CACHE:
         from pioneer.control.teacher import make_teacher
 
@@ -57,7 +60,9 @@ def _teacher(scenario: str, reward: str, margins: SoftMargins, assume: Assumptio
             assume_radius=assume.human_radius,
             assume_a_robot=assume.a_robot,
             assume_start_now=assume.start_now,
+            patience=patience.after,
         )
+        _CACHE[key].config = dataclasses.replace(_CACHE[key].config, patience=patience)
     return _CACHE[key]
 
 
@@ -107,6 +112,7 @@ def collect_episode(
     label_prev: str,
     margins: SoftMargins,
     assume: Assumptions,
+    patience: Patience,
 ) -> dict[str, Any]:
     """Run one episode driven by the teacher (``checkpoint is None``) or the student, with the
     teacher labelling every step. Returns arrays ``obs (T, 29)``, ``action (T, 2)`` (teacher
@@ -116,11 +122,12 @@ def collect_episode(
     ``target_scores (T, k)`` (:func:`_score_targets`).
     ``margins``: the teacher's soft margins (:class:`pioneer.control.teacher.SoftMargins`),
     ``assume`` what its predictions assume of people
-    (:class:`~pioneer.control.teacher.Assumptions`)."""
+    (:class:`~pioneer.control.teacher.Assumptions`), ``patience`` how long it holds to its
+    preferences without progress (:class:`~pioneer.control.teacher.Patience`)."""
     from pioneer.envs.env import NavEnv
     from pioneer.envs.episode import Episode, Step
 
-    teacher = _teacher(scenario, reward, margins, assume)
+    teacher = _teacher(scenario, reward, margins, assume, patience)
     student = _student(checkpoint) if checkpoint is not None else None
     driver = _Labelled(teacher, student, label_prev)
     rows_obs, rows_lab, rows_app, rows_clear = [], [], [], []
@@ -178,8 +185,10 @@ def _score_targets(teacher: Any, decision: Any) -> tuple[NDArray[np.float64], ND
 def collect_task(args: CollectTask) -> str:
     """Collect one episode (:func:`collect_episode`) and write it to its path: the
     :class:`pioneer.imitation.rounds.Collector` function of DAgger's students."""
-    scenario, reward, checkpoint, env_seed, path, label_prev, margins, assume = args
-    ep = collect_episode(scenario, reward, checkpoint, env_seed, label_prev, margins, assume)
+    scenario, reward, checkpoint, env_seed, path, label_prev, margins, assume, patience = args
+    ep = collect_episode(
+        scenario, reward, checkpoint, env_seed, label_prev, margins, assume, patience
+    )
     return save_episode(path, ep)
 
 

@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
 from pioneer.config import Config
-from pioneer.control.teacher import Assumptions, SoftMargins
+from pioneer.control.teacher import Assumptions, Patience, SoftMargins
 from pioneer.data import base_scenario
 from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
@@ -134,6 +134,9 @@ class DaggerConfig(Config):
     # place of what the student cannot see (docs/student.md, "Which variation costs the
     # student")
     assume: Assumptions = Assumptions()
+    # Beyond the paper: how long the labelling teacher holds to its margins and learned term
+    # without progress (docs/teacher.md, "Patience")
+    patience: Patience = Patience()
     teacher_episodes: Count = 50  # round 0, driven by the teacher
     rounds: NonNegativeInt = 10  # student-driven rounds after round 0
     episodes_per_round: Count = 50  # episodes of every later round
@@ -165,7 +168,9 @@ class DaggerConfig(Config):
         """Build from a plain dict, also in the layout of runs and checkpoints written before
         the student's settings were nested (``student`` its kind, ``action_mode`` and
         ``nll_beta`` beside it)."""
-        return super().from_dict(_one_tier_before_tiers(_nest_student(data)))
+        return super().from_dict(
+            _no_patience_before_patience(_one_tier_before_tiers(_nest_student(data)))
+        )
 
     def episodes_in(self, rnd: int) -> int:
         """Episodes collected in round ``rnd``."""
@@ -227,6 +232,14 @@ def _one_tier_before_tiers(data: Any) -> Any:
     if not isinstance(margins, dict) or "tiers" in margins:
         return data
     return {**data, "margins": {**margins, "tiers": 1}}
+
+
+def _no_patience_before_patience(data: Any) -> Any:
+    """``data`` with ``patience.after = 0`` where it has no ``patience``: runs stored before
+    the teacher had patience were labelled by a teacher without it, and resume as such."""
+    if not isinstance(data, dict) or "patience" in data or "scenario" not in data:
+        return data
+    return {**data, "patience": {"after": 0.0}}
 
 
 def scenario_set(pattern: str) -> list[str]:
@@ -422,6 +435,7 @@ class _Students:
             cfg.label_prev,
             cfg.margins,
             cfg.assume,
+            cfg.patience,
         )
 
     def aggregate(self, episodes: Sequence[Mapping[str, Any]]) -> Data:
