@@ -221,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _single_threaded_blas()
         _register_scenario_files(scenario_files)
         check_option_bounds(command)  # --workers >= 1, --seed >= 0 …
-        check_outputs(command)
+        check_outputs(command, scenario_files)
         return int(command.run())
     except PioneerError as exc:
         return _refused(str(exc))

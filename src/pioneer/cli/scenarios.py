@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 import tyro
 
 from pioneer.cli._common import (
+    Flag,
     OutDir,
     OutFile,
     Output,
@@ -135,6 +136,8 @@ class SampleLayouts:
     prefix: str = default(sample_variants, "prefix")
     """variant names: PREFIX-0000, PREFIX-0001, …"""
     dist: tyro.conf.OmitArgPrefixes[LayoutDistribution] = LayoutDistribution()
+    overwrite: Flag = False
+    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
 
     def run(self) -> int:
         """Draw, write the file, print a summary line."""
