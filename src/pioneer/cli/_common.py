@@ -130,22 +130,24 @@ def check_outputs(command: object, inputs: Sequence[str] = ()) -> None:
         output_dir_kind,
     )
 
+    outputs = _marked(command, Output)
+    for _, value, mark in outputs:
+        path = Path(value)
+        _check_ancestor(path)
+        if mark.kind == "file":
+            check_regular_target(path)
+        else:
+            output_dir_kind(path)
     read = [*inputs]
     for name, value, mark in _marked(command, Input):
         if mark.kind == "file":
             check_input_file(value, flag_name(type(command), name))
         read.append(value)
     overwrite = getattr(command, "overwrite", None)
-    for _, value, mark in _marked(command, Output):
-        path = Path(value)
-        _check_ancestor(path)
-        check_not_input(path, read)
-        if mark.kind == "file":
-            check_regular_target(path)
-            if isinstance(overwrite, bool):
-                check_new_output(path, "--overwrite", overwrite)
-        else:
-            output_dir_kind(path)
+    for _, value, mark in outputs:
+        check_not_input(value, read)
+        if mark.kind == "file" and isinstance(overwrite, bool):
+            check_new_output(value, "--overwrite", overwrite)
 
 
 def _check_ancestor(path: Path) -> None:
