@@ -117,7 +117,9 @@ _TREE = _Group(
 
 _SCENARIOS_HELP = (
     "register the scenario variants of a JSON file (format pioneer.scenarios/1, see "
-    "docs/simulator.md) for the command; same as listing it in PIONEER_SCENARIOS"
+    "docs/simulator.md) for the command; same as listing it in PIONEER_SCENARIOS; several "
+    "files follow one --scenarios (--scenarios A B), or the flag repeats (--scenarios A "
+    "--scenarios B)"
 )
 
 
@@ -139,8 +141,10 @@ def _tree_type(name: str, group: _Group) -> Any:
     fields: list[Any] = [("command", required)]
     if group is _TREE:
         files = Annotated[
-            tyro.conf.UseAppendAction[tuple[str, ...]],
-            tyro.conf.arg(metavar="FILE", help=_SCENARIOS_HELP),
+            tuple[str, ...],
+            tyro.conf.arg(
+                metavar="FILE", help=_SCENARIOS_HELP, help_behavior_hint="(default: none)"
+            ),
         ]
         fields.append(("scenarios", files, dataclasses.field(default=())))
     return dataclasses.make_dataclass(name, fields, frozen=True)
@@ -148,15 +152,27 @@ def _tree_type(name: str, group: _Group) -> Any:
 
 def _split(argv: Sequence[str]) -> tuple[list[str], list[str], _Leaf | _Group, list[str]]:
     """``argv`` as (global options, command names, the node they name, the rest: the
-    command's options)."""
-    i = 0
+    command's options). The files of every ``--scenarios`` (each followed by one or more,
+    up to the next option or command name) are gathered behind one ``--scenarios``."""
+    i, head, files, given = 0, [], [], False
     while i < len(argv) and argv[i].startswith("-"):
-        i += 2 if argv[i] == "--scenarios" else 1
+        if argv[i] != "--scenarios":
+            head.append(argv[i])
+            i += 1
+            continue
+        given, i = True, i + 1
+        while i < len(argv) and not argv[i].startswith("-") and argv[i] not in _TREE.children:
+            files.append(argv[i])
+            i += 1
+    if given and not files:
+        refuse(expect("pioneer --scenarios", "one or more FILE", None, "name a scenario file"))
+    if given:
+        head += ["--scenarios", *files]
     start, node = i, cast(_Leaf | _Group, _TREE)
     while isinstance(node, _Group) and i < len(argv) and argv[i] in node.children:
         node = node.children[argv[i]]
         i += 1
-    return list(argv[:start]), list(argv[start:i]), node, list(argv[i:])
+    return head, list(argv[start:i]), node, list(argv[i:])
 
 
 def _parse(argv: Sequence[str]) -> tuple[Command, tuple[str, ...]]:
