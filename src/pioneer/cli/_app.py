@@ -19,7 +19,7 @@ import importlib
 import os
 import sys
 import typing
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Annotated, Any, NoReturn, cast
 
@@ -30,6 +30,7 @@ from pioneer.cli._parse import one_line, parse, refuse
 from pioneer.config import check_option_bounds
 from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
 from pioneer.interrupt import Interrupted, handle_signals
+from pioneer.io import naming_path
 
 __all__ = ["main"]
 
@@ -225,6 +226,40 @@ def _register_scenario_files(files: Sequence[str]) -> None:
             raise
 
 
+class _NamedStdout:
+    """``sys.stdout`` whose write errors name it (a full disk behind ``> out.txt``, ``>
+    /dev/full``): the one error line then says where the failed write went."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        """Write ``text``; an :class:`OSError` names standard output."""
+        with naming_path("standard output"):
+            return int(self._stream.write(text))
+
+    def flush(self) -> None:
+        """Flush; an :class:`OSError` names standard output."""
+        with naming_path("standard output"):
+            self._stream.flush()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _named_stdout() -> Iterator[None]:
+    """Run the block with :class:`_NamedStdout` as ``sys.stdout`` and flush it at the end
+    (inside, so a failed flush is reported like any write)."""
+    stream = sys.stdout
+    sys.stdout = cast(Any, _NamedStdout(stream))
+    try:
+        yield
+        sys.stdout.flush()
+    finally:
+        sys.stdout = stream
+
+
 @handle_signals()
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pioneer`` console script: parse, run, and turn any
@@ -238,7 +273,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _register_scenario_files(scenario_files)
         check_option_bounds(command)  # --workers >= 1, --seed >= 0 …
         check_outputs(command, scenario_files)
-        return int(command.run())
+        with _named_stdout():
+            return int(command.run())
     except PioneerError as exc:
         return _refused(str(exc))
     except Interrupted as exc:

@@ -36,6 +36,7 @@ from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from pioneer.config import MAX_EPISODES, check_count
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.eval.manifest import (
     MANIFEST_FILE,
@@ -507,6 +508,12 @@ def evaluate(
                 "set seeds and trials (--seeds, --trials) >= 1",
             )
         )
+    check_count(
+        "episodes (scenarios × policies × --seeds × --trials)",
+        len(set(scenarios)) * len(policies) * seeds * trials,
+        MAX_EPISODES,
+        "ask for fewer --seeds or --trials, or split the run over several --out folders",
+    )
     if seed_set not in SEED_SETS:
         raise ConfigError(expect("seed set", f"one of {SEED_SETS}", seed_set, "pick one"))
     if backend not in ("process", "ray"):

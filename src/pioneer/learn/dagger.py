@@ -63,7 +63,7 @@ import torch
 from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
-from pioneer.config import Config
+from pioneer.config import MAX_EPISODES, Config, check_count
 from pioneer.control.teacher import Assumptions, SoftMargins
 from pioneer.data import base_scenario
 from pioneer.errors import ConfigError, expect
@@ -275,6 +275,12 @@ def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> li
     from pioneer.reward.default import check_reward_fits, default_reward
     from pioneer.reward.density import DensityReward
 
+    check_count(
+        "DAgger episodes (--teacher-episodes + --rounds × --episodes-per-round)",
+        cfg.total_episodes,
+        MAX_EPISODES,
+        "ask for fewer rounds or episodes",
+    )
     names = scenario_set(cfg.scenario)
     output_dir_kind(out)
     _folder(out).check(cfg.to_dict())
