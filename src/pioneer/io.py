@@ -353,14 +353,15 @@ _STALE_UNREADABLE_S = 10.0  # a lock file still empty after this long was left b
 
 
 @contextlib.contextmanager
-def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
+def run_lock(folder: str | os.PathLike[str], instead: str = "use another --out") -> Iterator[Path]:
     """Hold ``folder``'s lock (creating the folder) for the block: one writer per run folder.
 
     The lock is the file ``folder/.lock``, created exclusively (``O_CREAT | O_EXCL``) with
     ``{"pid", "host", "started"}``; a second writer is refused with :class:`ConfigError`
-    naming the holder. A lock left by a process that no longer runs on this host (killed with
-    SIGKILL, the machine rebooted) is stale: it is replaced. The block's end — also by an
-    exception or a signal's :class:`~pioneer.interrupt.Interrupted` — removes the lock.
+    naming the holder (and ``instead``, what to do but wait). A lock left by a process that
+    no longer runs on this host (killed with SIGKILL, the machine rebooted) is stale: it is
+    replaced. The block's end — also by an exception or a signal's
+    :class:`~pioneer.interrupt.Interrupted` — removes the lock.
     """
     out = output_dir(folder)
     lock = out / LOCK_FILE
@@ -370,7 +371,7 @@ def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
         "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     with naming_path(lock):
-        _acquire(lock, mine)
+        _acquire(lock, mine, instead)
     try:
         yield out
     finally:
@@ -379,7 +380,7 @@ def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
                 lock.unlink()
 
 
-def _acquire(lock: Path, mine: dict[str, Any]) -> None:
+def _acquire(lock: Path, mine: dict[str, Any], instead: str) -> None:
     for _ in range(3):
         try:
             fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
@@ -389,13 +390,13 @@ def _acquire(lock: Path, mine: dict[str, Any]) -> None:
                 with contextlib.suppress(FileNotFoundError):
                     lock.unlink()
                 continue
-            raise ConfigError(_held_line(lock, holder)) from None
+            raise ConfigError(_held_line(lock, holder, instead)) from None
         with os.fdopen(fd, "w") as fh:
             fh.write(json.dumps(mine) + "\n")
             fh.flush()
             os.fsync(fh.fileno())
         return
-    raise ConfigError(_held_line(lock, _read_lock(lock)))
+    raise ConfigError(_held_line(lock, _read_lock(lock), instead))
 
 
 def _read_lock(lock: Path) -> dict[str, Any] | None:
@@ -434,7 +435,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _held_line(lock: Path, holder: dict[str, Any] | None) -> str:
+def _held_line(lock: Path, holder: dict[str, Any] | None, instead: str) -> str:
     who = (
         f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')}"
         if holder
@@ -444,7 +445,7 @@ def _held_line(lock: Path, holder: dict[str, Any] | None) -> str:
         f"run folder {lock.parent}",
         "one writer at a time",
         f"another run writing to it ({who})",
-        f"wait for it to end or use another --out; if no run uses the folder, delete {lock}",
+        f"wait for it to end or {instead}; if no run uses the folder, delete {lock}",
     )
 
 

@@ -153,10 +153,10 @@ class SampleLayouts:
         draws = draw_variants(self.dist, self.n, self.seed, self.prefix)
         try:
             with kept(lambda: self._kept(len(variants)), resumes=False):
-                for name, entry, rejected in progress_bar(
+                for name, entry, so_far in progress_bar(
                     draws, total=self.n, desc="layouts", unit="layout"
                 ):
-                    variants[name] = entry
+                    variants[name], rejected = entry, so_far
         except Interrupted:
             if variants:
                 self._write(variants, rejected)

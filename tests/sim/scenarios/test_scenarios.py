@@ -485,9 +485,7 @@ def test_bad_scenario_files_are_refused_with_a_house_message(
     assert_house_message(message, *needles)
 
 
-def test_a_variant_is_checked_when_first_used_and_a_missing_file_is_named(
-    clean_registry, tmp_path
-):
+def test_a_variant_is_checked_when_first_used_and_a_missing_file_is_named(clean_registry, tmp_path):
     """A file of many variants costs its parse: a variant's layout and the placement of its
     start states are checked when it is first used, and the error names the file and it."""
     sc = clean_registry

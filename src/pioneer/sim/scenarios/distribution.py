@@ -153,8 +153,8 @@ def sample_variants(
     the number of draws rejected because their bodies could not be placed."""
     variants: dict[str, dict[str, Any]] = {}
     rejected = 0
-    for name, entry, rejected in draw_variants(dist, n, seed, prefix):
-        variants[name] = entry
+    for name, entry, so_far in draw_variants(dist, n, seed, prefix):
+        variants[name], rejected = entry, so_far
     return variants, rejected
 
 
