@@ -132,7 +132,7 @@ def _check_record(p: Path, i: int, rec: Any, line: str, first: bool) -> None:
             else "delete that line"
         )
         got = f"a record without {', '.join(missing)} (it has {', '.join(sorted(rec)[:8])})"
-        raise DataError(expect(where, f"a record with {', '.join(_FIELDS)}", got, fix))
+        raise DataError(expect(where, f"a record with the fields {', '.join(_FIELDS)}", got, fix))
     if rec["event"] not in _EVENTS:
         raise DataError(
             expect(f"{where}: event", f"one of {_EVENTS}", rec["event"], "delete that line")
@@ -168,7 +168,7 @@ def parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
             raise DataError(
                 expect(
                     f"{p}: line {i}",
-                    "one strict JSON record",
+                    "one JSON record (strict: no NaN or Infinity)",
                     f"{line[:60]} ({why})",
                     "delete or repair that line, then resume",
                 )
