@@ -209,7 +209,8 @@ def test_run_writes_every_output(run_mdn):
     assert res.student == out / "student.safetensors"
     for name in ("config.json", "reward.npz", "curves.csv", "curves.png", "student.safetensors"):
         assert (out / name).is_file(), name
-    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+    settings = {**TINY_CFG.to_dict(), "reward_sha256": None}  # the default reward
+    assert json.loads((out / "config.json").read_text()) == settings
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in (out / "rounds").iterdir()) == [
         "round-00",
@@ -675,7 +676,8 @@ def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_
     (out / "config.json").write_text(json.dumps(old))
     again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
     assert again.curves == res.curves
-    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+    settings = {**TINY_CFG.to_dict(), "reward_sha256": None}  # the default reward
+    assert json.loads((out / "config.json").read_text()) == settings
 
 
 def test_the_flat_layout_of_older_runs_and_checkpoints_reads_as_the_nested_one():
