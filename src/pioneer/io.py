@@ -139,7 +139,8 @@ def check_not_input(
         if not inp.exists():
             continue
         if out.exists() and os.path.samefile(out, inp):
-            got = f"the input {inp} itself" if resolved == inp.resolve() else f"a link to {inp}"
+            same_name = out.absolute() == inp.absolute()
+            got = f"the input {inp} itself" if same_name else f"a link to the input {inp}"
         elif inp.is_dir() and resolved.is_relative_to(inp.resolve()):
             got = f"a path inside the input folder {inp}"
         else:

@@ -31,6 +31,7 @@ from pioneer.control.teacher import Assumptions, SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
+from pioneer.io import file_sha256
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set
 from pioneer.learn.models import StudentConfig
@@ -41,7 +42,9 @@ from pioneer.sim.world import SimConfig
 from pioneer_testutils import (
     STOP_SIGNALS,
     assert_house_message,
+    file_tree,
     interrupted_line,
+    one_error_line,
     run_cli,
     stop_cli,
 )
@@ -525,6 +528,50 @@ def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
     assert_house_message(str(err.value), "ep-000.npz", "delete that file")
 
 
+def test_a_resume_with_another_reward_is_refused_before_any_work(
+    run_mdn, reward_file, tmp_path, capsys
+):
+    """The settings hold the reward file's hash: the remaining episodes of a run are never
+    labelled under another reward (a default-reward run resumed with --reward, a --reward run
+    resumed with another file), and the refusal leaves the folder as it was."""
+    res, _ = run_mdn
+    out = tmp_path / "run"
+    shutil.copytree(res.out, out)
+    shutil.rmtree(out / "rounds" / "round-02")  # a round still to collect
+    other = tmp_path / "other.npz"
+    shutil.copyfile(reward_file, other)
+    with open(other, "ab") as fh:  # another file's bytes (a zip archive reads past them)
+        fh.write(b"\0")
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out, "--reward", str(reward_file))) == 2
+    one_error_line(capsys.readouterr().err, 2, "reward_sha256", "None", "--out")
+    assert file_tree(tmp_path) == before
+    config = json.loads((out / "config.json").read_text())
+    config["reward_sha256"] = file_sha256(reward_file)  # as a run made with --reward stores it
+    (out / "config.json").write_text(json.dumps(config))
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out, "--reward", str(other))) == 2
+    one_error_line(capsys.readouterr().err, 2, "reward_sha256", file_sha256(other)[:12])
+    assert file_tree(tmp_path) == before
+
+
+def test_a_resume_over_a_corrupt_episode_is_refused_before_any_work(
+    run_mdn, tmp_path, capsys, collected
+):
+    """A corrupt episode of an earlier round is named before a resumed run collects anything
+    (it was found only after the missing episodes had been collected)."""
+    res, _ = run_mdn
+    out = tmp_path / "run"
+    shutil.copytree(res.out, out)
+    shutil.rmtree(out / "rounds" / "round-02")  # a round still to collect
+    (out / "rounds" / "round-00" / "ep-001.npz").write_bytes(b"truncated")
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out)) == 2
+    one_error_line(capsys.readouterr().err, 2, "ep-001.npz", "delete that file")
+    assert file_tree(tmp_path) == before
+    assert collected == []
+
+
 @pytest.mark.parametrize(
     ("changes", "needle"),
     [
@@ -674,7 +721,7 @@ def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_
     old = _flat_layout(TINY_CFG)
     del old["action_mode"]
     (out / "config.json").write_text(json.dumps(old))
-    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    again = run_dagger(TINY_CFG, out, workers=1, progress=False)  # its default reward
     assert again.curves == res.curves
     settings = {**TINY_CFG.to_dict(), "reward_sha256": None}  # the default reward
     assert json.loads((out / "config.json").read_text()) == settings
@@ -737,10 +784,10 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(scenarios._REGISTRY, TINY, lambda: longer)
         with pytest.raises(ConfigError) as err:
-            run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+            run_dagger(TINY_CFG, out, workers=1, progress=False)
     assert_house_message(str(err.value), TINY, "sim", "--out")
     (out / dagger.SCENARIO_FILE).unlink()
-    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    again = run_dagger(TINY_CFG, out, workers=1, progress=False)  # its default reward
     assert again.curves == res.curves
     assert json.loads((out / dagger.SCENARIO_FILE).read_text()) == recorded
 

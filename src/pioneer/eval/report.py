@@ -141,7 +141,7 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
         if nested.is_file():  # a `pioneer reproduce` folder: its evaluation is in eval/
             fix = f"name its evaluation folder, {run / 'eval'}"
         raise DataError(expect(f"{run}", f"a run folder with {EPISODES_FILE}", "none", fix))
-    with run_lock(run, instead="summarize it when that run ends"):
+    with run_lock(run, instead="summarize a copy of the folder"):
         records, whole, duplicates = parse_records(path)
         found = seed_sets(records)
         if len(found) > 1:  # pioneer eval never mixes them in one folder

@@ -163,7 +163,7 @@ def draw_variants(
 ) -> Iterator[tuple[str, dict[str, Any], int]]:
     """The ``n`` valid layouts of :func:`sample_variants` one at a time, as they are drawn:
     ``(name, scenario-file entry, draws rejected so far)``. ``n`` is checked against
-    :data:`MAX_LAYOUTS` and the prefix before the first draw."""
+    :data:`MAX_LAYOUTS` and the prefix at once, before the first draw."""
     if n < 1:
         raise ScenarioError(expect("layouts to draw", "n >= 1", n, "ask for at least one"))
     check_count("layouts to draw (--n)", n, MAX_LAYOUTS, "ask for fewer, in several files")
@@ -171,6 +171,12 @@ def draw_variants(
         check_name("layout name prefix (--prefix)", prefix)
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
+    return _draws(dist, n, seed, prefix)
+
+
+def _draws(
+    dist: LayoutDistribution, n: int, seed: int, prefix: str
+) -> Iterator[tuple[str, dict[str, Any], int]]:
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
     rejected = 0
     budget = PLACEMENT_CHECK_SEEDS / MIN_PLACEMENT_RATE  # [draws] beyond it the rate is too low
