@@ -711,7 +711,7 @@ def _flat_layout(cfg: DaggerConfig) -> dict[str, Any]:
     return {**d, "student": student["kind"], **flat}
 
 
-def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_path):
+def test_a_run_from_before_the_nested_student_resumes(run_mdn, tmp_path):
     """A config.json of the flat layout (``student`` the kind, ``action_mode`` and
     ``nll_beta`` beside it), older still without ``action_mode`` (meaning "mode"), resumes
     and is rewritten in the current layout."""
@@ -771,7 +771,7 @@ def test_the_labelling_teacher_makes_its_assumptions(monkeypatch, reward_file, t
     assert DaggerConfig.from_dict(old).assume == Assumptions()
 
 
-def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):
+def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, tmp_path):
     """The run records its scenario's full config; a variant redefined under the same name
     (e.g. an edited scenario file) cannot silently resume, and an older run without the
     record resumes and gets one."""
@@ -892,7 +892,7 @@ def _selection(out: Path) -> list[dict[str, str]]:
 
 
 def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_the_best(
-    run_mdn, reward_file, tmp_path, driven, capsys
+    run_mdn, tmp_path, driven, capsys
 ):
     """With ``select_episodes`` a finished run (its rounds reused, nothing collected again)
     drives each round's student alone on the same validation episodes; the rows equal those
@@ -901,7 +901,7 @@ def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_
     out = tmp_path / "select"
     shutil.copytree(res.out, out)
     cfg = TINY_CFG.replace(select_episodes=3)
-    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    sel = run_dagger(cfg, out, workers=1, progress=False)
     assert len(driven) == 3 * 3
     seeds = [s for _, s in driven[:3]]
     assert [s for _, s in driven] == seeds * 3  # the same episodes for every round
@@ -933,16 +933,16 @@ def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_
     shutil.copy(
         out / "rounds/round-02/student.safetensors", out / "rounds/round-01/student.safetensors"
     )
-    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    run_dagger(cfg, out, workers=1, progress=False)
     assert [d for d, _ in driven] == ["round-01"] * 3
     # Back to the paper's choice: the last round's student.
-    last = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    last = run_dagger(TINY_CFG, out, workers=1, progress=False)
     assert last.chosen == 2 and last.selection == []
     assert last.student.read_bytes() == (out / "rounds/round-02/student.safetensors").read_bytes()
 
 
 def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
-    run_mdn, reward_file, tmp_path, monkeypatch
+    run_mdn, tmp_path, monkeypatch
 ):
     res, _ = run_mdn
     out = tmp_path / "rule"
@@ -955,9 +955,9 @@ def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
 
     monkeypatch.setattr(dagger, "_drive_task", fake)
     cfg = TINY_CFG.replace(select_episodes=2)
-    assert run_dagger(cfg, out, workers=1, reward=reward_file, progress=False).chosen == 0
+    assert run_dagger(cfg, out, workers=1, progress=False).chosen == 0
     outcome["round-02"] = ["success"] * 2
     (out / "selection.csv").unlink()
-    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    sel = run_dagger(cfg, out, workers=1, progress=False)
     assert sel.chosen == 2 and sel.selection[2]["collision_rate"] == 0.0
     assert [r["success_rate"] for r in sel.selection] == [1.0, 0.5, 1.0]
