@@ -58,6 +58,7 @@ from pioneer.io import (
     check_regular_target,
     file_record,
     output_dir_kind,
+    read_text_bounded,
     run_lock,
     to_json,
 )
@@ -424,10 +425,15 @@ def _pinned_scenarios(out: Path, names: Sequence[str]) -> tuple[dict[str, Any], 
     """``(recorded, mine)``: the scenario definitions in ``out/scenarios.json`` and those of
     ``names`` now; a changed one is refused (reads only)."""
     from pioneer.sim.scenarios import pin_scenario
+    from pioneer.sim.scenarios.registry import MAX_SCENARIO_FILE_BYTES
 
     p = out / SCENARIOS_FILE
     try:
-        known: dict[str, Any] = json.loads(p.read_text()) if p.exists() else {}
+        known: dict[str, Any] = (
+            json.loads(read_text_bounded(p, "scenarios file", MAX_SCENARIO_FILE_BYTES))
+            if p.exists()
+            else {}
+        )
     except json.JSONDecodeError as exc:
         raise DataError(
             expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
