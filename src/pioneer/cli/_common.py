@@ -17,7 +17,7 @@ from annotated_types import Ge
 
 from pioneer.cli._parse import config_flags, flag_name
 from pioneer.config import default
-from pioneer.errors import ConfigError, expect
+from pioneer.errors import ConfigError, DataError, expect
 
 if TYPE_CHECKING:
     from pioneer.eval.harness import PolicySpec
@@ -140,8 +140,11 @@ def check_outputs(command: object, inputs: Sequence[str] = ()) -> None:
             output_dir_kind(path)
     read = [*inputs]
     for name, value, mark in _marked(command, Input):
+        flag = flag_name(type(command), name)
         if mark.kind == "file":
-            check_input_file(value, flag_name(type(command), name))
+            check_input_file(value, flag)
+        elif not Path(value).exists():
+            raise DataError(expect(flag, "an existing file or folder", value, "check the path"))
         read.append(value)
     overwrite = getattr(command, "overwrite", None)
     for _, value, mark in outputs:
