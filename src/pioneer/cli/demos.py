@@ -52,7 +52,7 @@ class DemosGenerate:
     selection: tyro.conf.OmitArgPrefixes[Selection] = Selection()
     """which successful episodes make positive demonstrations"""
     overwrite: Flag = False
-    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Generate and save; print the dataset's summary (JSON)."""

@@ -54,7 +54,7 @@ class Replay:
     odom_topic: Annotated[str | None, optional("TOPIC", "the bag's only one")] = None
     """Odometry topic for --goal-frame odom"""
     overwrite: Flag = False
-    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Replay and write the CSV."""
@@ -82,7 +82,7 @@ class Export:
     action_mode: Annotated[ActionMode | None, optional("{mode,mean}", "the model's")] = None
     """the MDN's executed action"""
     overwrite: Flag = False
-    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Export with the parity check."""

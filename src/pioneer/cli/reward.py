@@ -64,7 +64,7 @@ class RewardFit:
     allow_one_sided: Flag = False
     """fit a dataset without positives or without negatives (a warning instead of a refusal)"""
     overwrite: Flag = False
-    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Fit (selecting l if asked) and save."""

@@ -138,7 +138,7 @@ class SampleLayouts:
     """variant names: PREFIX-0000, PREFIX-0001, …"""
     dist: tyro.conf.OmitArgPrefixes[LayoutDistribution] = LayoutDistribution()
     overwrite: Flag = False
-    """replace --out if it exists (default: refuse, so a file you made is never replaced)"""
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Draw (with a progress bar), write the file, print a summary line. Stopped by
