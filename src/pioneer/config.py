@@ -114,6 +114,16 @@ def check_within(owner: str, name: str, value: float, low: float, high: float) -
     _Bounds(lower=low, upper=high).check(owner, name, value)
 
 
+def check_count(what: str, n: int, ceiling: int, fix: str) -> None:
+    """Raise :class:`ConfigError` if the count ``n`` (episodes, layouts, samples a run would
+    hold) exceeds ``ceiling``, before any work; the message states the ceiling."""
+    if n > ceiling:
+        raise ConfigError(expect(what, f"at most {ceiling:,} (the ceiling of one run)", n, fix))
+
+
+MAX_EPISODES = 200_000  # episodes one run may ask for (≈ 15 × the paper profile's)
+
+
 def check_range(owner: str, name: str, lo: float, hi: float) -> None:
     """Raise :class:`ConfigError` unless ``lo <= hi`` and both are finite."""
     _Items(items=(None, None), ordered=True).check(owner, name, (lo, hi))

@@ -34,6 +34,7 @@ class Interrupted(BaseException):
     def __init__(self, signum: int) -> None:
         self.signum = signum
         self.kept: str | None = None  # what the run keeps, for the CLI's line (see kept())
+        self.resumes = True  # whether running the command again resumes it (see kept())
         super().__init__(self.name)
 
     @property
@@ -51,6 +52,8 @@ class Interrupted(BaseException):
         ``command`` (the argument vector that resumes it)."""
         if self.kept is None:
             return f"interrupted ({self.name})"
+        if not self.resumes:
+            return f"interrupted ({self.name}); {self.kept}"
         return f"interrupted ({self.name}); {self.kept}; resume with: {shlex.join(command)}"
 
 
@@ -111,12 +114,14 @@ def deferred() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def kept(describe: Callable[[], str]) -> Iterator[None]:
+def kept(describe: Callable[[], str], resumes: bool = True) -> Iterator[None]:
     """Name what a run keeps when it is interrupted inside the block: ``describe()``, e.g.
-    ``"37 of 120 episodes kept in runs/e/episodes.jsonl"``. The innermost block names it."""
+    ``"37 of 120 episodes kept in runs/e/episodes.jsonl"``. The innermost block names it;
+    ``resumes=False``: the command run again does not resume (the line gives no command)."""
     try:
         yield
     except Interrupted as exc:
         if exc.kept is None:
             exc.kept = describe()
+            exc.resumes = resumes
         raise

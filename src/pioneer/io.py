@@ -15,7 +15,7 @@ import tempfile
 import time
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,10 @@ from pioneer.errors import ConfigError, DataError, expect
 __all__ = [
     "LOCK_FILE",
     "atomic_path",
+    "check_input_file",
     "check_name",
+    "check_new_output",
+    "check_not_input",
     "check_regular_target",
     "file_record",
     "file_sha256",
@@ -35,6 +38,7 @@ __all__ = [
     "naming_path",
     "output_dir",
     "output_dir_kind",
+    "read_text_bounded",
     "remove_partial_writes",
     "run_lock",
     "to_json",
@@ -75,6 +79,95 @@ def _kind(mode: int) -> str:
     if stat.S_ISREG(mode):
         return "a regular file"
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def check_input_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a :class:`Path` if it is an existing regular file (also behind a symlink);
+    a missing path, a folder, a device, a FIFO or a socket raises :class:`DataError` naming
+    ``what`` — before anything reads it (a FIFO would block, ``/dev/zero`` never end)."""
+    p = Path(path)
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        raise DataError(expect(what, "an existing file", os.fspath(p), "check the path")) from None
+    if not stat.S_ISREG(mode):
+        raise DataError(expect(f"{what} {p}", "a regular file", _kind(mode), "name a file"))
+    return p
+
+
+def read_text_bounded(path: str | os.PathLike[str], what: str, limit: int) -> str:
+    """The UTF-8 text of the regular file ``path`` (:func:`check_input_file`), refused with
+    :class:`DataError` naming ``what`` if it is larger than ``limit`` bytes (the limit in the
+    message) or is not UTF-8 (the offset of the first bad byte in the message)."""
+    p = check_input_file(path, what)
+    with open(p, "rb") as fh:
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise DataError(
+            expect(
+                f"{what} {p}",
+                f"at most {limit:,} bytes",
+                f"a larger file ({p.stat().st_size:,} bytes)",
+                "split it into smaller files",
+            )
+        )
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(
+            expect(
+                f"{what} {p}",
+                "UTF-8 text",
+                f"byte 0x{data[exc.start]:02x} at offset {exc.start}, not UTF-8",
+                "save the file as UTF-8",
+            )
+        ) from None
+
+
+def check_not_input(
+    output: str | os.PathLike[str], inputs: Iterable[str | os.PathLike[str] | None]
+) -> None:
+    """Refuse with :class:`DataError` an ``output`` that would write over one of the command's
+    ``inputs``: the same file (by name, through a symbolic link or a hard link) or a path
+    inside an input folder. Missing inputs are left to their own checks."""
+    out = Path(output)
+    resolved = out.resolve()
+    for item in inputs:
+        if item is None:
+            continue
+        inp = Path(item)
+        if not inp.exists():
+            continue
+        if out.exists() and os.path.samefile(out, inp):
+            same_name = out.absolute() == inp.absolute()
+            got = f"the input {inp} itself" if same_name else f"a link to the input {inp}"
+        elif inp.is_dir() and resolved.is_relative_to(inp.resolve()):
+            got = f"a path inside the input folder {inp}"
+        else:
+            continue
+        raise DataError(
+            expect(
+                f"output {out}",
+                "a path that is none of the command's inputs",
+                got,
+                "write the output to another path",
+            )
+        )
+
+
+def check_new_output(path: str | os.PathLike[str], flag: str, overwrite: bool) -> None:
+    """Refuse with :class:`DataError` an output file that exists already unless ``overwrite``
+    (``flag`` given): a dataset or a model a user made is never replaced unasked."""
+    p = Path(path)
+    if not overwrite and p.exists():
+        raise DataError(
+            expect(
+                f"output {p}",
+                "a new path",
+                "an existing file",
+                f"choose another path, or pass {flag} to replace it",
+            )
+        )
 
 
 def output_dir_kind(path: str | os.PathLike[str]) -> Path:
@@ -261,14 +354,15 @@ _STALE_UNREADABLE_S = 10.0  # a lock file still empty after this long was left b
 
 
 @contextlib.contextmanager
-def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
+def run_lock(folder: str | os.PathLike[str], instead: str = "use another --out") -> Iterator[Path]:
     """Hold ``folder``'s lock (creating the folder) for the block: one writer per run folder.
 
     The lock is the file ``folder/.lock``, created exclusively (``O_CREAT | O_EXCL``) with
     ``{"pid", "host", "started"}``; a second writer is refused with :class:`ConfigError`
-    naming the holder. A lock left by a process that no longer runs on this host (killed with
-    SIGKILL, the machine rebooted) is stale: it is replaced. The block's end — also by an
-    exception or a signal's :class:`~pioneer.interrupt.Interrupted` — removes the lock.
+    naming the holder (and ``instead``, what to do but wait). A lock left by a process that
+    no longer runs on this host (killed with SIGKILL, the machine rebooted) is stale: it is
+    replaced. The block's end — also by an exception or a signal's
+    :class:`~pioneer.interrupt.Interrupted` — removes the lock.
     """
     out = output_dir(folder)
     lock = out / LOCK_FILE
@@ -278,7 +372,7 @@ def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
         "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     with naming_path(lock):
-        _acquire(lock, mine)
+        _acquire(lock, mine, instead)
     try:
         yield out
     finally:
@@ -287,7 +381,7 @@ def run_lock(folder: str | os.PathLike[str]) -> Iterator[Path]:
                 lock.unlink()
 
 
-def _acquire(lock: Path, mine: dict[str, Any]) -> None:
+def _acquire(lock: Path, mine: dict[str, Any], instead: str) -> None:
     for _ in range(3):
         try:
             fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
@@ -297,13 +391,13 @@ def _acquire(lock: Path, mine: dict[str, Any]) -> None:
                 with contextlib.suppress(FileNotFoundError):
                     lock.unlink()
                 continue
-            raise ConfigError(_held_line(lock, holder)) from None
+            raise ConfigError(_held_line(lock, holder, instead)) from None
         with os.fdopen(fd, "w") as fh:
             fh.write(json.dumps(mine) + "\n")
             fh.flush()
             os.fsync(fh.fileno())
         return
-    raise ConfigError(_held_line(lock, _read_lock(lock)))
+    raise ConfigError(_held_line(lock, _read_lock(lock), instead))
 
 
 def _read_lock(lock: Path) -> dict[str, Any] | None:
@@ -342,7 +436,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _held_line(lock: Path, holder: dict[str, Any] | None) -> str:
+def _held_line(lock: Path, holder: dict[str, Any] | None, instead: str) -> str:
     who = (
         f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')}"
         if holder
@@ -352,7 +446,7 @@ def _held_line(lock: Path, holder: dict[str, Any] | None) -> str:
         f"run folder {lock.parent}",
         "one writer at a time",
         f"another run writing to it ({who})",
-        f"wait for it to end or use another --out; if no run uses the folder, delete {lock}",
+        f"wait for it to end or {instead}; if no run uses the folder, delete {lock}",
     )
 
 

@@ -103,7 +103,9 @@ def test_reward_fit_options(demos_file, tmp_path, capsys):
     assert "NaN" not in own, own
     assert json.loads(own)["auroc_pos_vs_neg"] is None
     assert json.loads(own)["reward_negative_mean"] is None
-    assert main([*argv, "--allow-one-sided"]) == 0
+    assert main([*argv, "--allow-one-sided"]) == 2  # the model made above is not replaced
+    assert "--overwrite" in capsys.readouterr().err
+    assert main([*argv, "--allow-one-sided", "--overwrite"]) == 0
     assert _json(capsys)["n_train"] == 30
     assert main(["reward", "show", "--model", str(pos), "--demos", str(demos_file)]) == 0
     shown = _json(capsys)

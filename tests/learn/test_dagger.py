@@ -31,6 +31,7 @@ from pioneer.control.teacher import Assumptions, SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError, DataError, ScenarioError
 from pioneer.eval.harness import episode_seed
+from pioneer.io import file_sha256
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.collect import TARGET_CANDIDATES
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set, score_weights
@@ -42,7 +43,9 @@ from pioneer.sim.world import SimConfig
 from pioneer_testutils import (
     STOP_SIGNALS,
     assert_house_message,
+    file_tree,
     interrupted_line,
+    one_error_line,
     run_cli,
     stop_cli,
 )
@@ -212,7 +215,8 @@ def test_run_writes_every_output(run_mdn):
     assert res.student == out / "student.safetensors"
     for name in ("config.json", "reward.npz", "curves.csv", "curves.png", "student.safetensors"):
         assert (out / name).is_file(), name
-    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+    settings = {**TINY_CFG.to_dict(), "reward_sha256": None}  # the default reward
+    assert json.loads((out / "config.json").read_text()) == settings
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in (out / "rounds").iterdir()) == [
         "round-00",
@@ -535,6 +539,50 @@ def test_a_corrupt_episode_file_is_reported_with_the_fix(tmp_path, reward_file):
     assert_house_message(str(err.value), "ep-000.npz", "delete that file")
 
 
+def test_a_resume_with_another_reward_is_refused_before_any_work(
+    run_mdn, reward_file, tmp_path, capsys
+):
+    """The settings hold the reward file's hash: the remaining episodes of a run are never
+    labelled under another reward (a default-reward run resumed with --reward, a --reward run
+    resumed with another file), and the refusal leaves the folder as it was."""
+    res, _ = run_mdn
+    out = tmp_path / "run"
+    shutil.copytree(res.out, out)
+    shutil.rmtree(out / "rounds" / "round-02")  # a round still to collect
+    other = tmp_path / "other.npz"
+    shutil.copyfile(reward_file, other)
+    with open(other, "ab") as fh:  # another file's bytes (a zip archive reads past them)
+        fh.write(b"\0")
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out, "--reward", str(reward_file))) == 2
+    one_error_line(capsys.readouterr().err, 2, "reward_sha256", "None", "--out")
+    assert file_tree(tmp_path) == before
+    config = json.loads((out / "config.json").read_text())
+    config["reward_sha256"] = file_sha256(reward_file)  # as a run made with --reward stores it
+    (out / "config.json").write_text(json.dumps(config))
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out, "--reward", str(other))) == 2
+    one_error_line(capsys.readouterr().err, 2, "reward_sha256", file_sha256(other)[:12])
+    assert file_tree(tmp_path) == before
+
+
+def test_a_resume_over_a_corrupt_episode_is_refused_before_any_work(
+    run_mdn, tmp_path, capsys, collected
+):
+    """A corrupt episode of an earlier round is named before a resumed run collects anything
+    (it was found only after the missing episodes had been collected)."""
+    res, _ = run_mdn
+    out = tmp_path / "run"
+    shutil.copytree(res.out, out)
+    shutil.rmtree(out / "rounds" / "round-02")  # a round still to collect
+    (out / "rounds" / "round-00" / "ep-001.npz").write_bytes(b"truncated")
+    before = file_tree(tmp_path)
+    assert main(_distill_argv(out)) == 2
+    one_error_line(capsys.readouterr().err, 2, "ep-001.npz", "delete that file")
+    assert file_tree(tmp_path) == before
+    assert collected == []
+
+
 @pytest.mark.parametrize(
     ("changes", "needle"),
     [
@@ -674,7 +722,7 @@ def _flat_layout(cfg: DaggerConfig) -> dict[str, Any]:
     return {**d, "student": student["kind"], **flat}
 
 
-def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_path):
+def test_a_run_from_before_the_nested_student_resumes(run_mdn, tmp_path):
     """A config.json of the flat layout (``student`` the kind, ``action_mode`` and
     ``nll_beta`` beside it), older still without ``action_mode`` (meaning "mode"), resumes
     and is rewritten in the current layout."""
@@ -684,9 +732,10 @@ def test_a_run_from_before_the_nested_student_resumes(run_mdn, reward_file, tmp_
     old = _flat_layout(TINY_CFG)
     del old["action_mode"]
     (out / "config.json").write_text(json.dumps(old))
-    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    again = run_dagger(TINY_CFG, out, workers=1, progress=False)  # its default reward
     assert again.curves == res.curves
-    assert json.loads((out / "config.json").read_text()) == TINY_CFG.to_dict()
+    settings = {**TINY_CFG.to_dict(), "reward_sha256": None}  # the default reward
+    assert json.loads((out / "config.json").read_text()) == settings
 
 
 def test_the_flat_layout_of_older_runs_and_checkpoints_reads_as_the_nested_one():
@@ -735,7 +784,7 @@ def test_the_labelling_teacher_makes_its_assumptions(monkeypatch, reward_file, t
     assert DaggerConfig.from_dict(old).assume == Assumptions()
 
 
-def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file, tmp_path):
+def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, tmp_path):
     """The run records its scenario's full config; a variant redefined under the same name
     (e.g. an edited scenario file) cannot silently resume, and an older run without the
     record resumes and gets one."""
@@ -748,10 +797,10 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, reward_file
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(scenarios._REGISTRY, TINY, lambda: longer)
         with pytest.raises(ConfigError) as err:
-            run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+            run_dagger(TINY_CFG, out, workers=1, progress=False)
     assert_house_message(str(err.value), TINY, "sim", "--out")
     (out / dagger.SCENARIO_FILE).unlink()
-    again = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    again = run_dagger(TINY_CFG, out, workers=1, progress=False)  # its default reward
     assert again.curves == res.curves
     assert json.loads((out / dagger.SCENARIO_FILE).read_text()) == recorded
 
@@ -856,7 +905,7 @@ def _selection(out: Path) -> list[dict[str, str]]:
 
 
 def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_the_best(
-    run_mdn, reward_file, tmp_path, driven, capsys
+    run_mdn, tmp_path, driven, capsys
 ):
     """With ``select_episodes`` a finished run (its rounds reused, nothing collected again)
     drives each round's student alone on the same validation episodes; the rows equal those
@@ -865,7 +914,7 @@ def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_
     out = tmp_path / "select"
     shutil.copytree(res.out, out)
     cfg = TINY_CFG.replace(select_episodes=3)
-    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    sel = run_dagger(cfg, out, workers=1, progress=False)
     assert len(driven) == 3 * 3
     seeds = [s for _, s in driven[:3]]
     assert [s for _, s in driven] == seeds * 3  # the same episodes for every round
@@ -897,16 +946,16 @@ def test_selection_drives_every_rounds_student_on_validation_episodes_and_ships_
     shutil.copy(
         out / "rounds/round-02/student.safetensors", out / "rounds/round-01/student.safetensors"
     )
-    run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    run_dagger(cfg, out, workers=1, progress=False)
     assert [d for d, _ in driven] == ["round-01"] * 3
     # Back to the paper's choice: the last round's student.
-    last = run_dagger(TINY_CFG, out, workers=1, reward=reward_file, progress=False)
+    last = run_dagger(TINY_CFG, out, workers=1, progress=False)
     assert last.chosen == 2 and last.selection == []
     assert last.student.read_bytes() == (out / "rounds/round-02/student.safetensors").read_bytes()
 
 
 def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
-    run_mdn, reward_file, tmp_path, monkeypatch
+    run_mdn, tmp_path, monkeypatch
 ):
     res, _ = run_mdn
     out = tmp_path / "rule"
@@ -919,10 +968,10 @@ def test_selection_prefers_the_most_successful_round_and_the_later_on_a_tie(
 
     monkeypatch.setattr(dagger, "_drive_task", fake)
     cfg = TINY_CFG.replace(select_episodes=2)
-    assert run_dagger(cfg, out, workers=1, reward=reward_file, progress=False).chosen == 0
+    assert run_dagger(cfg, out, workers=1, progress=False).chosen == 0
     outcome["round-02"] = ["success"] * 2
     (out / "selection.csv").unlink()
-    sel = run_dagger(cfg, out, workers=1, reward=reward_file, progress=False)
+    sel = run_dagger(cfg, out, workers=1, progress=False)
     assert sel.chosen == 2 and sel.selection[2]["collision_rate"] == 0.0
     assert [r["success_rate"] for r in sel.selection] == [1.0, 0.5, 1.0]
 

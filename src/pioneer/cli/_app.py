@@ -19,7 +19,7 @@ import importlib
 import os
 import sys
 import typing
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Annotated, Any, NoReturn, cast
 
@@ -30,6 +30,7 @@ from pioneer.cli._parse import one_line, parse, refuse
 from pioneer.config import check_option_bounds
 from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
 from pioneer.interrupt import Interrupted, handle_signals
+from pioneer.io import naming_path
 
 __all__ = ["main"]
 
@@ -117,7 +118,9 @@ _TREE = _Group(
 
 _SCENARIOS_HELP = (
     "register the scenario variants of a JSON file (format pioneer.scenarios/1, see "
-    "docs/simulator.md) for the command; same as listing it in PIONEER_SCENARIOS"
+    "docs/simulator.md) for the command; same as listing it in PIONEER_SCENARIOS; several "
+    "files follow one --scenarios (--scenarios A B), or the flag repeats (--scenarios A "
+    "--scenarios B)"
 )
 
 
@@ -139,8 +142,10 @@ def _tree_type(name: str, group: _Group) -> Any:
     fields: list[Any] = [("command", required)]
     if group is _TREE:
         files = Annotated[
-            tyro.conf.UseAppendAction[tuple[str, ...]],
-            tyro.conf.arg(metavar="FILE", help=_SCENARIOS_HELP),
+            tuple[str, ...],
+            tyro.conf.arg(
+                metavar="FILE", help=_SCENARIOS_HELP, help_behavior_hint="(default: none)"
+            ),
         ]
         fields.append(("scenarios", files, dataclasses.field(default=())))
     return dataclasses.make_dataclass(name, fields, frozen=True)
@@ -148,15 +153,27 @@ def _tree_type(name: str, group: _Group) -> Any:
 
 def _split(argv: Sequence[str]) -> tuple[list[str], list[str], _Leaf | _Group, list[str]]:
     """``argv`` as (global options, command names, the node they name, the rest: the
-    command's options)."""
-    i = 0
+    command's options). The files of every ``--scenarios`` (each followed by one or more,
+    up to the next option or command name) are gathered behind one ``--scenarios``."""
+    i, head, files, given = 0, [], [], False
     while i < len(argv) and argv[i].startswith("-"):
-        i += 2 if argv[i] == "--scenarios" else 1
+        if argv[i] != "--scenarios":
+            head.append(argv[i])
+            i += 1
+            continue
+        given, i = True, i + 1
+        while i < len(argv) and not argv[i].startswith("-") and argv[i] not in _TREE.children:
+            files.append(argv[i])
+            i += 1
+    if given and not files:
+        refuse(expect("pioneer --scenarios", "one or more FILE", None, "name a scenario file"))
+    if given:
+        head += ["--scenarios", *files]
     start, node = i, cast(_Leaf | _Group, _TREE)
     while isinstance(node, _Group) and i < len(argv) and argv[i] in node.children:
         node = node.children[argv[i]]
         i += 1
-    return list(argv[:start]), list(argv[start:i]), node, list(argv[i:])
+    return head, list(argv[start:i]), node, list(argv[i:])
 
 
 def _parse(argv: Sequence[str]) -> tuple[Command, tuple[str, ...]]:
@@ -209,6 +226,40 @@ def _register_scenario_files(files: Sequence[str]) -> None:
             raise
 
 
+class _NamedStdout:
+    """``sys.stdout`` whose write errors name it (a full disk behind ``> out.txt``, ``>
+    /dev/full``): the one error line then says where the failed write went."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        """Write ``text``; an :class:`OSError` names standard output."""
+        with naming_path("standard output"):
+            return int(self._stream.write(text))
+
+    def flush(self) -> None:
+        """Flush; an :class:`OSError` names standard output."""
+        with naming_path("standard output"):
+            self._stream.flush()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _named_stdout() -> Iterator[None]:
+    """Run the block with :class:`_NamedStdout` as ``sys.stdout`` and flush it at the end
+    (inside, so a failed flush is reported like any write)."""
+    stream = sys.stdout
+    sys.stdout = cast(Any, _NamedStdout(stream))
+    try:
+        yield
+        sys.stdout.flush()
+    finally:
+        sys.stdout = stream
+
+
 @handle_signals()
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pioneer`` console script: parse, run, and turn any
@@ -221,8 +272,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _single_threaded_blas()
         _register_scenario_files(scenario_files)
         check_option_bounds(command)  # --workers >= 1, --seed >= 0 …
-        check_outputs(command)
-        return int(command.run())
+        check_outputs(command, scenario_files)
+        with _named_stdout():
+            return int(command.run())
     except PioneerError as exc:
         return _refused(str(exc))
     except Interrupted as exc:

@@ -17,7 +17,7 @@ from annotated_types import Ge
 
 from pioneer.cli._parse import config_flags, flag_name
 from pioneer.config import default
-from pioneer.errors import ConfigError, expect
+from pioneer.errors import ConfigError, DataError, expect
 
 if TYPE_CHECKING:
     from pioneer.eval.harness import PolicySpec
@@ -27,6 +27,9 @@ __all__ = [
     "Ablations",
     "Command",
     "Flag",
+    "InFile",
+    "InPath",
+    "Input",
     "OutDir",
     "OutFile",
     "Output",
@@ -85,24 +88,69 @@ OutFile = Annotated[str, metavar("FILE"), Output("file")]
 OutDir = Annotated[str, metavar("DIR"), Output("folder")]
 
 
-def check_outputs(command: object) -> None:
-    """Refuse, before any work, an output path of the wrong kind (a folder, device, FIFO or
-    socket where a file goes; anything but a folder where a folder goes) or under a file —
-    so an hour's run does not end at a path it cannot write."""
-    from pioneer.io import check_regular_target, output_dir_kind
+@dataclasses.dataclass(frozen=True)
+class Input:
+    """Marks an option as a path the command reads: a regular ``file``, or a ``path`` that
+    may be a file or a folder (a ROS 2 bag, a distill folder). No output may be one of them
+    (:func:`check_outputs`), and a ``file`` must be a regular file before it is read."""
 
+    kind: Literal["file", "path"]
+
+
+InFile = Annotated[str, metavar("FILE"), Input("file")]
+InPath = Annotated[str, metavar("PATH"), Input("path")]
+
+
+def _marked(command: object, mark: type[Any]) -> list[tuple[str, Any, Any]]:
+    """``(field name, value, mark)`` of every field of ``command`` marked with a ``mark``
+    instance whose value is set."""
     hints = typing.get_type_hints(type(command), include_extras=True)
+    out = []
     for f in dataclasses.fields(command):  # type: ignore[arg-type]
-        marks = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, Output)]
+        marks = [m for m in getattr(hints[f.name], "__metadata__", ()) if isinstance(m, mark)]
         value = getattr(command, f.name)
-        if not marks or value is None:
-            continue
+        if marks and value is not None:
+            out.append((f.name, value, marks[0]))
+    return out
+
+
+def check_outputs(command: object, inputs: Sequence[str] = ()) -> None:
+    """Refuse, before any work, an output path of the wrong kind (a folder, device, FIFO or
+    socket where a file goes; anything but a folder where a folder goes) or under a file, an
+    output that is one of the command's inputs (its ``Input`` options and ``inputs``, the
+    ``--scenarios`` files) or inside an input folder, an input file that is no regular file,
+    and — for a command with ``--overwrite`` — an output file that exists already: so an
+    hour's run does not end at a path it cannot write, and nothing a user owns is replaced
+    unasked."""
+    from pioneer.io import (
+        check_input_file,
+        check_new_output,
+        check_not_input,
+        check_regular_target,
+        output_dir_kind,
+    )
+
+    outputs = _marked(command, Output)
+    for _, value, mark in outputs:
         path = Path(value)
         _check_ancestor(path)
-        if marks[0].kind == "file":
+        if mark.kind == "file":
             check_regular_target(path)
         else:
             output_dir_kind(path)
+    read = [*inputs]
+    for name, value, mark in _marked(command, Input):
+        flag = flag_name(type(command), name)
+        if mark.kind == "file":
+            check_input_file(value, flag)
+        elif not Path(value).exists():
+            raise DataError(expect(flag, "an existing file or folder", value, "check the path"))
+        read.append(value)
+    overwrite = getattr(command, "overwrite", None)
+    for _, value, mark in outputs:
+        check_not_input(value, read)
+        if mark.kind == "file" and isinstance(overwrite, bool):
+            check_new_output(value, "--overwrite", overwrite)
 
 
 def _check_ancestor(path: Path) -> None:

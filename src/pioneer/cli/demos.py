@@ -8,6 +8,7 @@ from typing import Annotated
 import tyro
 
 from pioneer.cli._common import (
+    Flag,
     OutFile,
     Seed,
     command_line,
@@ -50,6 +51,8 @@ class DemosGenerate:
     """positives from the rules-only teacher or the scripted courteous driver"""
     selection: tyro.conf.OmitArgPrefixes[Selection] = Selection()
     """which successful episodes make positive demonstrations"""
+    overwrite: Flag = False
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Generate and save; print the dataset's summary (JSON)."""

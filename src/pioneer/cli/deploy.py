@@ -11,7 +11,16 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import tyro
 
-from pioneer.cli._common import OutFile, default, metavar, one_of, optional
+from pioneer.cli._common import (
+    Flag,
+    InFile,
+    InPath,
+    OutFile,
+    default,
+    metavar,
+    one_of,
+    optional,
+)
 from pioneer.deploy.bag import GOAL_FRAMES, replay_bag
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.io import to_json
@@ -30,9 +39,9 @@ __all__ = ["Export", "Replay"]
 class Replay:
     """ROS bag LaserScans → the student's commands as CSV (no ROS needed); prints a summary."""
 
-    bag: Annotated[str, metavar("BAG")]
+    bag: Annotated[InPath, metavar("BAG")]
     """ROS 1 .bag file or ROS 2 bag folder"""
-    model: Annotated[str, metavar("FILE")]
+    model: InFile
     """student .onnx (from pioneer export)"""
     out: OutFile
     """output CSV"""
@@ -44,6 +53,8 @@ class Replay:
     """LaserScan topic"""
     odom_topic: Annotated[str | None, optional("TOPIC", "the bag's only one")] = None
     """Odometry topic for --goal-frame odom"""
+    overwrite: Flag = False
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Replay and write the CSV."""
@@ -64,12 +75,14 @@ class Replay:
 class Export:
     """Student checkpoint → ONNX, written only if it passes a parity check; prints a summary."""
 
-    model: Annotated[str, metavar("PATH")]
+    model: InPath
     """student .safetensors or a distill folder"""
     out: OutFile
     """output .onnx"""
     action_mode: Annotated[ActionMode | None, optional("{mode,mean}", "the model's")] = None
     """the MDN's executed action"""
+    overwrite: Flag = False
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Export with the parity check."""

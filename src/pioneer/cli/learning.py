@@ -19,6 +19,7 @@ from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 from pioneer.baselines.sb3 import train_sb3_ppo
 from pioneer.cli._common import (
     Flag,
+    Input,
     OutDir,
     Seed,
     Workers,
@@ -72,7 +73,9 @@ class Distill:
     """the DAgger run (defaults: the paper's, §V-B.2)"""
     workers: Workers = None
     """processes collecting episodes"""
-    reward: Annotated[str | None, optional("FILE", "fit on the shipped demos")] = None
+    reward: Annotated[str | None, optional("FILE", "fit on the shipped demos"), Input("file")] = (
+        None
+    )
     """teacher reward model .npz"""
 
     def run(self) -> int:

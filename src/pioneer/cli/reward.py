@@ -13,7 +13,15 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import tyro
 
-from pioneer.cli._common import Flag, OutDir, OutFile, config_flags, metavar, optional
+from pioneer.cli._common import (
+    Flag,
+    InFile,
+    Input,
+    OutDir,
+    OutFile,
+    config_flags,
+    optional,
+)
 from pioneer.data import DEMOS_DIR
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json
@@ -39,7 +47,7 @@ config_flags(DensityConfig, length_scale=optional("L", "the median heuristic"))
 class RewardFit:
     """Fit the density reward on a dataset and save the model (.npz); prints a summary."""
 
-    demos: Annotated[str, metavar("FILE")]
+    demos: InFile
     """the dataset (.npz)"""
     out: OutFile
     """output model .npz"""
@@ -49,10 +57,14 @@ class RewardFit:
     """pick l by held-out AUROC"""
     min_gamma: Annotated[float | None, optional("G", "keep all")] = None
     """drop samples with γ below this"""
-    mirror_demos: Annotated[str | None, optional("FILE", "no mirror augmentation")] = None
+    mirror_demos: Annotated[
+        str | None, optional("FILE", "no mirror augmentation"), Input("file")
+    ] = None
     """the mirror scenario's dataset (.npz), added mirrored (hl-rr's for hr-rl)"""
     allow_one_sided: Flag = False
     """fit a dataset without positives or without negatives (a warning instead of a refusal)"""
+    overwrite: Flag = False
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
         """Fit (selecting l if asked) and save."""
@@ -122,9 +134,9 @@ class RewardFit:
 class RewardShow:
     """The summary of a fitted model, scored on a dataset (JSON)."""
 
-    model: Annotated[str, metavar("FILE")]
+    model: InFile
     """the fitted model (.npz)"""
-    demos: Annotated[str | None, optional("FILE", "the training set")] = None
+    demos: Annotated[str | None, optional("FILE", "the training set"), Input("file")] = None
     """dataset to score"""
 
     def run(self) -> int:
@@ -176,7 +188,7 @@ class StudyStatic:
 
     out: OutDir
     """output folder"""
-    demos: Annotated[str, metavar("FILE")] = str(DEMOS_DIR / "static.npz")
+    demos: InFile = str(DEMOS_DIR / "static.npz")
     """static-study demos"""
 
     def run(self) -> int:

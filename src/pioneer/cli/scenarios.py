@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 import tyro
 
 from pioneer.cli._common import (
+    Flag,
     OutDir,
     OutFile,
     Output,
@@ -27,6 +28,7 @@ from pioneer.io import inside, output_dir
 from pioneer.sim.scenarios.distribution import (
     MIN_PLACEMENT_RATE,
     LayoutDistribution,
+    draw_variants,
     sample_variants,
 )
 from pioneer.sim.scenarios.registry import PLACEMENT_CHECK_SEEDS, check_placement
@@ -135,14 +137,53 @@ class SampleLayouts:
     prefix: str = default(sample_variants, "prefix")
     """variant names: PREFIX-0000, PREFIX-0001, …"""
     dist: tyro.conf.OmitArgPrefixes[LayoutDistribution] = LayoutDistribution()
+    overwrite: Flag = False
+    """replace an existing --out (otherwise refused: a file you made is never replaced)"""
 
     def run(self) -> int:
-        """Draw, write the file, print a summary line."""
-        from pioneer.io import check_name, to_json, write_text_atomic
-        from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
+        """Draw (with a progress bar), write the file, print a summary line. Stopped by
+        Ctrl-C or SIGTERM, it writes the layouts drawn so far: a scenario file of its own."""
+        from pioneer.interrupt import Interrupted, kept
+        from pioneer.io import check_name
+        from pioneer.progress import progress_bar
 
         check_name("--prefix", self.prefix)  # the variants' names become file names
-        variants, rejected = sample_variants(self.dist, self.n, self.seed, self.prefix)
+        variants: dict[str, dict[str, object]] = {}
+        rejected = 0
+        draws = draw_variants(self.dist, self.n, self.seed, self.prefix)
+        try:
+            with kept(lambda: self._kept(len(variants)), resumes=False):
+                for name, entry, so_far in progress_bar(
+                    draws, total=self.n, desc="layouts", unit="layout"
+                ):
+                    variants[name], rejected = entry, so_far
+        except Interrupted:
+            if variants:
+                self._write(variants, rejected)
+            raise
+        self._write(variants, rejected)
+        print(
+            f"{len(variants)} layouts ({rejected} draws redrawn: their bodies not placed, or "
+            f"placed in under {MIN_PLACEMENT_RATE:.0%} of the start-state draws): ",
+            end="",
+        )
+        print(self.out)
+        return 0
+
+    def _kept(self, done: int) -> str:
+        """What a stopped run keeps (:func:`pioneer.interrupt.kept`)."""
+        if not done:
+            return f"0 of {self.n} layouts drawn, nothing written"
+        return (
+            f"{done} of {self.n} layouts kept in {self.out} (a scenario file of those; "
+            f"to draw all {self.n}, run the command again with --overwrite)"
+        )
+
+    def _write(self, variants: dict[str, dict[str, object]], rejected: int) -> None:
+        """The scenario file of ``variants`` (written whole or not at all)."""
+        from pioneer.io import to_json, write_text_atomic
+        from pioneer.sim.scenarios import SCENARIO_FILE_FORMAT
+
         doc = {
             "format": SCENARIO_FILE_FORMAT,
             "distribution": {
@@ -154,10 +195,3 @@ class SampleLayouts:
             "scenarios": variants,
         }
         write_text_atomic(self.out, to_json(doc, indent=1) + "\n")
-        print(
-            f"{len(variants)} layouts ({rejected} draws redrawn: their bodies not placed, or "
-            f"placed in under {MIN_PLACEMENT_RATE:.0%} of the start-state draws): ",
-            end="",
-        )
-        print(self.out)
-        return 0

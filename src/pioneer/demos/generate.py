@@ -30,7 +30,7 @@ from typing import Any, Literal
 import numpy as np
 
 from pioneer.bounds import NonNegative, Positive
-from pioneer.config import Config
+from pioneer.config import Config, check_count
 from pioneer.demos.scripted import CarelessDriver, CorridorDriver, CourteousDriver
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode, Step
@@ -106,6 +106,9 @@ def negative_frames(frames: list[Frame], dt: float, window: float = NEGATIVE_WIN
     return [f for f in frames if f["time"] >= t_end - window - 1e-9]
 
 
+MAX_SAMPLES = 1_000_000  # samples one dataset may ask for (the paper's: 880)
+
+
 def _sample_counts(name: str, n_positive: int | None, n_negative: int | None) -> tuple[int, int]:
     """The requested counts, or the scenario's defaults (the paper's); checked."""
     pos_default, neg_default = DEFAULT_SIZES.get(name, (700, 180))
@@ -120,6 +123,7 @@ def _sample_counts(name: str, n_positive: int | None, n_negative: int | None) ->
                 "ask for at least one sample (--positive N or --negative N), none below 0",
             )
         )
+    check_count("samples (--positive + --negative)", n_pos + n_neg, MAX_SAMPLES, "ask for fewer")
     return n_pos, n_neg
 
 

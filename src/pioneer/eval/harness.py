@@ -36,6 +36,7 @@ from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from pioneer.config import MAX_EPISODES, check_count
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.eval.manifest import (
     MANIFEST_FILE,
@@ -57,6 +58,7 @@ from pioneer.io import (
     check_regular_target,
     file_record,
     output_dir_kind,
+    read_text_bounded,
     run_lock,
     to_json,
 )
@@ -423,10 +425,15 @@ def _pinned_scenarios(out: Path, names: Sequence[str]) -> tuple[dict[str, Any], 
     """``(recorded, mine)``: the scenario definitions in ``out/scenarios.json`` and those of
     ``names`` now; a changed one is refused (reads only)."""
     from pioneer.sim.scenarios import pin_scenario
+    from pioneer.sim.scenarios.registry import MAX_SCENARIO_FILE_BYTES
 
     p = out / SCENARIOS_FILE
     try:
-        known: dict[str, Any] = json.loads(p.read_text()) if p.exists() else {}
+        known: dict[str, Any] = (
+            json.loads(read_text_bounded(p, "scenarios file", MAX_SCENARIO_FILE_BYTES))
+            if p.exists()
+            else {}
+        )
     except json.JSONDecodeError as exc:
         raise DataError(
             expect(str(p), "valid JSON", exc.msg, "delete the file (it is rewritten)")
@@ -507,6 +514,12 @@ def evaluate(
                 "set seeds and trials (--seeds, --trials) >= 1",
             )
         )
+    check_count(
+        "episodes (scenarios × policies × --seeds × --trials)",
+        len(set(scenarios)) * len(policies) * seeds * trials,
+        MAX_EPISODES,
+        "ask for fewer --seeds or --trials, or split the run over several --out folders",
+    )
     if seed_set not in SEED_SETS:
         raise ConfigError(expect("seed set", f"one of {SEED_SETS}", seed_set, "pick one"))
     if backend not in ("process", "ray"):

@@ -10,16 +10,17 @@ and upgrades records of an older layout (:func:`upgrade_record`).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.eval.episode import RECORD_FORMAT
-from pioneer.io import naming_path, to_json
+from pioneer.io import check_input_file, naming_path, to_json
 
 __all__ = [
     "append_record",
@@ -27,6 +28,7 @@ __all__ = [
     "key_of",
     "parse_records",
     "read_records",
+    "seed_sets",
     "upgrade_record",
     "warn_duplicates",
 ]
@@ -72,43 +74,106 @@ def key_of(rec: Mapping[str, Any]) -> tuple[str, str, int, int]:
     return (str(rec["scenario"]), str(rec["policy"]), int(rec["seed"]), int(rec["trial"]))
 
 
+MAX_RECORD_BYTES = 8 * 2**20  # one record line's size limit (a record is ≈ 2–50 kB)
+_FIELDS = ("scenario", "policy", "seed", "trial", "event")  # every record has them
+_EVENTS = ("success", "collision", "timeout")
+_NUMBERS = ("time_s", "path_length_m", "min_gap_m", "time_close_s")  # numbers or null
+
+
+def _lines(p: Path) -> Iterator[tuple[int, str | None]]:
+    """``(line number, text)`` of every line of ``p`` that ends in a newline (text without it)
+    and, last, ``(number, None)`` for a last line without one; a line longer than
+    :data:`MAX_RECORD_BYTES` or not UTF-8 raises :class:`DataError` naming it."""
+    with open(check_input_file(p, "records file"), "rb") as fh:
+        for i in itertools.count(1):
+            raw = fh.readline(MAX_RECORD_BYTES + 1)
+            if not raw:
+                return
+            if not raw.endswith(b"\n"):
+                if len(raw) > MAX_RECORD_BYTES:
+                    raise DataError(
+                        expect(
+                            f"{p}: line {i}",
+                            f"a record of at most {MAX_RECORD_BYTES:,} bytes",
+                            "a longer line",
+                            "delete that line (its episode is run again on resume)",
+                        )
+                    )
+                yield i, None
+                return
+            try:
+                yield i, raw[:-1].decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise DataError(
+                    expect(
+                        f"{p}: line {i}",
+                        "UTF-8 text",
+                        f"byte 0x{raw[exc.start]:02x} at column {exc.start + 1}",
+                        "delete or repair that line",
+                    )
+                ) from None
+
+
+def _strict(token: str) -> Any:
+    raise ValueError(f"{token} (strict JSON has no NaN or Infinity)")
+
+
+def _check_record(p: Path, i: int, rec: Any, line: str, first: bool) -> None:
+    """A record as :func:`pioneer.eval.harness.run_task` writes it: a JSON object with the
+    identifying fields, a known ``event`` and numbers (or null) where numbers go."""
+    where = f"{p}: line {i}"
+    if not isinstance(rec, dict):
+        raise DataError(expect(where, "a JSON object", line[:60], "delete or repair that line"))
+    missing = [k for k in _FIELDS if k not in rec]
+    if missing:
+        fix = (
+            "name a folder written by pioneer eval (this file holds another command's records)"
+            if first
+            else "delete that line"
+        )
+        got = f"a record without {', '.join(missing)} (it has {', '.join(sorted(rec)[:8])})"
+        raise DataError(expect(where, f"a record with the fields {', '.join(_FIELDS)}", got, fix))
+    if rec["event"] not in _EVENTS:
+        raise DataError(
+            expect(f"{where}: event", f"one of {_EVENTS}", rec["event"], "delete that line")
+        )
+    for key in _NUMBERS:
+        value = rec.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise DataError(
+                expect(f"{where}: {key}", "a number or null", value, "delete that line")
+            )
+
+
 def parse_records(p: Path) -> tuple[list[dict[str, Any]], list[str], int]:
     """``(records, the file's complete lines, duplicates dropped)`` of ``p`` (none if it does
-    not exist), reading only; a last line without a newline is left out of both."""
-    text = p.read_text() if p.exists() else ""
-    lines = text.split("\n")
-    whole = lines[:-1]
+    not exist), reading only; a last line without a newline is left out of both. Records are
+    strict: JSON without NaN or Infinity, each an object with the identifying fields, a known
+    event and numbers where numbers go; a line that is not (or is not UTF-8, or is longer than
+    :data:`MAX_RECORD_BYTES`) raises :class:`DataError` naming it."""
     out: list[dict[str, Any]] = []
+    whole: list[str] = []
     seen: set[tuple[str, str, int, int]] = set()
     duplicates = 0
-    for i, line in enumerate(whole, start=1):
+    for i, line in _lines(p) if p.exists() else ():
+        if line is None:
+            break
+        whole.append(line)
         if not line.strip():
             continue
         try:
-            rec = json.loads(line)
-        except json.JSONDecodeError as exc:
+            rec = json.loads(line, parse_constant=_strict)
+        except ValueError as exc:
+            why = exc.msg if isinstance(exc, json.JSONDecodeError) else str(exc)
             raise DataError(
                 expect(
                     f"{p}: line {i}",
-                    "one JSON record",
-                    line[:60],
+                    "one JSON record (strict: no NaN or Infinity)",
+                    f"{line[:60]} ({why})",
                     "delete or repair that line, then resume",
                 )
             ) from exc
-        if not isinstance(rec, dict):
-            raise DataError(
-                expect(f"{p}: line {i}", "a JSON object", line[:60], "delete or repair that line")
-            )
-        missing = {"scenario", "policy", "seed", "trial", "event"} - set(rec)
-        if missing:
-            raise DataError(
-                expect(
-                    f"{p}: line {i}",
-                    "fields scenario/policy/seed/trial/event",
-                    sorted(missing),
-                    "delete that line",
-                )
-            )
+        _check_record(p, i, rec, line, first=not out and not duplicates)
         try:
             key = key_of(rec)
         except (TypeError, ValueError) as exc:
@@ -183,10 +248,15 @@ def append_record(fh: Any, rec: dict[str, Any]) -> None:
             raise
 
 
+def seed_sets(records: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The seed sets of ``records``, sorted (records before seed sets: evaluation)."""
+    return sorted({str(r.get("seed_set", "evaluation")) for r in records})
+
+
 def check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: str) -> None:
     """A folder holds episodes of one seed set (records before seed sets: evaluation); records
     of another are refused."""
-    found = sorted({str(r.get("seed_set", "evaluation")) for r in records})
+    found = seed_sets(records)
     if found and found != [seed_set]:
         raise ConfigError(
             expect(

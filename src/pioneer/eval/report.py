@@ -128,8 +128,8 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
     run none of whose records holds them, it refuses (:class:`DataError`, nothing written).
     """
     from pioneer.eval.harness import EPISODES_FILE
-    from pioneer.eval.metrics import summarize
-    from pioneer.eval.records import parse_records, warn_duplicates
+    from pioneer.eval.records import parse_records, seed_sets, warn_duplicates
+    from pioneer.io import run_lock
 
     run = Path(run_dir)
     fix = "name a folder written by pioneer eval (it holds episodes.jsonl)"
@@ -141,10 +141,41 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
         if nested.is_file():  # a `pioneer reproduce` folder: its evaluation is in eval/
             fix = f"name its evaluation folder, {run / 'eval'}"
         raise DataError(expect(f"{run}", f"a run folder with {EPISODES_FILE}", "none", fix))
-    records, _, duplicates = parse_records(path)
-    warn_duplicates(path, duplicates)
-    if path.read_bytes()[-1:] not in (b"", b"\n"):
-        print(f"pioneer: warning: {path}: an unfinished last line ignored", file=sys.stderr)
+    with run_lock(run, instead="summarize a copy of the folder"):
+        records, whole, duplicates = parse_records(path)
+        found = seed_sets(records)
+        if len(found) > 1:  # pioneer eval never mixes them in one folder
+            raise DataError(
+                expect(
+                    f"{path}: records",
+                    "episodes of one seed set, as pioneer eval writes a folder",
+                    f"{' and '.join(found)} episodes",
+                    "move one seed set's records (their seed_set field) to a folder of their own",
+                )
+            )
+        warn_duplicates(path, duplicates)
+        if path.stat().st_size > sum(len(line.encode()) + 1 for line in whole):
+            print(f"pioneer: warning: {path}: an unfinished last line ignored", file=sys.stderr)
+        summary = _summarize_records(path, records, metrics)
+        write_summary(run, summary)
+    old = sum(1 for r in records if not isinstance(r.get("measures"), Mapping))
+    if old:
+        print(
+            f"pioneer: note: {old} of {len(records)} episodes in {path} were recorded before the "
+            "social-navigation measures (record format < 3): their measure columns are empty; "
+            "re-run the evaluation into a new --out to measure them",
+            file=sys.stderr,
+        )
+    return summary
+
+
+def _summarize_records(
+    path: Path, records: Sequence[Mapping[str, Any]], metrics: str
+) -> dict[str, dict[str, Any]]:
+    """The summary of a run's ``records`` (read from ``path``); refused without records, and
+    for the social measures of records that hold none."""
+    from pioneer.eval.metrics import summarize
+
     if not records:
         raise DataError(
             expect(str(path), "at least one episode record", 0, "run pioneer eval into it first")
@@ -162,13 +193,4 @@ def summarize_run(run_dir: str | Path, metrics: str = "paper") -> dict[str, dict
                 "re-run the evaluation into a new --out to measure them, or use --metrics paper",
             )
         )
-    summary = summarize(records)
-    write_summary(run, summary)
-    if old:
-        print(
-            f"pioneer: note: {old} of {len(records)} episodes in {path} were recorded before the "
-            "social-navigation measures (record format < 3): their measure columns are empty; "
-            "re-run the evaluation into a new --out to measure them",
-            file=sys.stderr,
-        )
-    return summary
+    return summarize(records)

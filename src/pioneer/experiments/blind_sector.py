@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.config import default
+from pioneer.config import MAX_EPISODES, check_count, default
 from pioneer.data import shipped_student
 from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
 from pioneer.errors import ConfigError, expect
@@ -140,6 +140,12 @@ def run_blind_sector_study(
     if episodes < 1:
         fix = f"use e.g. {default(run_blind_sector_study, 'episodes')}"
         raise ConfigError(expect("--episodes", "an integer >= 1", episodes, fix))
+    check_count(
+        "episodes (scenarios × scanners × --episodes)",
+        len(set(scenarios)) * (1 + len(rules)) * episodes,
+        MAX_EPISODES,
+        "ask for fewer --episodes",
+    )
     from pioneer.sim.scenarios import get_scenario
 
     students = {sc: shipped_student(get_scenario(sc).name) for sc in scenarios}

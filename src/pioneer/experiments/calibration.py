@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.config import default
+from pioneer.config import MAX_EPISODES, check_count, default
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.io import output_dir, to_json, write_text_atomic
@@ -220,6 +220,12 @@ def calibrate(
     if episodes < 1:
         fix = f"use e.g. {default(calibrate, 'episodes')}"
         raise ConfigError(expect("--episodes", "an integer >= 1", episodes, fix))
+    check_count(
+        "episodes (scenarios × --episodes)",
+        len(set(scenarios)) * episodes,
+        MAX_EPISODES,
+        "ask for fewer --episodes",
+    )
     names = [get_scenario(s).name for s in scenarios]  # unknown names fail here, at once
     policy_factory(driver)  # an unknown driver fails here, at once
     for s in names:  # and one without its parts in a scenario (a student without a shipped one)

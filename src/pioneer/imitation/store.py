@@ -131,8 +131,21 @@ class RunFolder:
 
     def load_round(self, rnd: int, n: int) -> list[dict[str, Any]]:
         """The arrays of round ``rnd``'s ``n`` episodes, in order (all must exist)."""
+        return [self._load(self.episode_path(rnd, i)) for i in range(n)]
+
+    def _load(self, path: Path) -> dict[str, Any]:
         fix = "delete that file and rerun the command (it will be collected again)"
-        return [load_npz(self.episode_path(rnd, i), f"{self.what} episode", fix) for i in range(n)]
+        return load_npz(path, f"{self.what} episode", fix)
+
+    def check_episodes(self, sizes: Sequence[int]) -> None:
+        """Load every episode on disk of a run of ``sizes[r]`` episodes in round r: a corrupt
+        one (truncated, not an archive) raises :class:`DataError` naming it, before a resumed
+        run collects anything."""
+        for rnd, n in enumerate(sizes):
+            for i in range(n):
+                path = self.episode_path(rnd, i)
+                if path.exists():
+                    self._load(path)
 
     def on_disk(self, sizes: Sequence[int]) -> tuple[int, int]:
         """Episodes and rounds' models on disk, of a run of ``sizes[r]`` episodes in round r."""

@@ -13,7 +13,8 @@ CrowdNav++'s imitation warm start). Output directory (everything written atomica
 of the same command resumes; one run writes to it at a time, :func:`pioneer.io.run_lock`;
 every input, the reward file included, is checked before the folder is created or changed)::
 
-    DIR/config.json                      the DaggerConfig (a rerun must match it)
+    DIR/config.json                      the DaggerConfig and the SHA-256 of the --reward file
+                                         (a rerun must match both)
     DIR/scenario.json                    the scenario's full config (a rerun must match it)
                                          (a pattern such as ``general-*``: every match's)
     DIR/reward.npz                       the teacher's density reward (a pattern: reward-BASE.npz)
@@ -63,7 +64,7 @@ import torch
 from numpy.typing import NDArray
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
-from pioneer.config import Config
+from pioneer.config import MAX_EPISODES, Config, check_count
 from pioneer.control.teacher import Assumptions, Patience, SoftMargins
 from pioneer.data import base_scenario
 from pioneer.errors import ConfigError, expect
@@ -204,8 +205,21 @@ def _folder(out: Path) -> RunFolder:
 
 
 def _current_layout(stored: dict[str, Any]) -> dict[str, Any]:
-    """A stored DaggerConfig in today's layout (:meth:`DaggerConfig.from_dict`)."""
-    return DaggerConfig.from_dict(stored).to_dict()
+    """Stored settings in today's layout: the DaggerConfig (:meth:`DaggerConfig.from_dict`)
+    and the reward's hash (none in a run stored before it was recorded, or of the default
+    reward)."""
+    config = {k: v for k, v in stored.items() if k != REWARD_KEY}
+    return {**DaggerConfig.from_dict(config).to_dict(), REWARD_KEY: stored.get(REWARD_KEY)}
+
+
+REWARD_KEY = "reward_sha256"  # the settings' key of the --reward file's hash
+
+
+def _settings(cfg: DaggerConfig, reward: str | Path | None) -> dict[str, Any]:
+    """What a run is made with and a resume must match: the DaggerConfig and the SHA-256 of
+    the teacher's ``reward`` file (None: the default, fitted on the shipped demos and kept in
+    the run folder) — the remaining episodes are never labelled under another reward."""
+    return {**cfg.to_dict(), REWARD_KEY: file_sha256(reward) if reward is not None else None}
 
 
 def _sizes(cfg: DaggerConfig) -> list[int]:
@@ -296,9 +310,17 @@ def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> li
     from pioneer.reward.default import check_reward_fits, default_reward
     from pioneer.reward.density import DensityReward
 
+    check_count(
+        "DAgger episodes (--teacher-episodes + --rounds × --episodes-per-round)",
+        cfg.total_episodes,
+        MAX_EPISODES,
+        "ask for fewer rounds or episodes",
+    )
     names = scenario_set(cfg.scenario)
     output_dir_kind(out)
-    _folder(out).check(cfg.to_dict())
+    folder = _folder(out)
+    folder.check(_settings(cfg, reward))
+    folder.check_episodes(_sizes(cfg))  # a corrupt episode is refused before any new one
     _check_scenario(out, names)
     if reward is not None:
         model = DensityReward.load(reward)
@@ -328,9 +350,10 @@ def _prepare(
     all, else the one fitted on the shipped demos of the scenario's base
     (:func:`_default_reward_paths`)."""
     folder = _folder(out)
-    folder.check(cfg.to_dict())  # again, holding the lock
+    settings = _settings(cfg, reward)
+    folder.check(settings)  # again, holding the lock
     scenarios = _check_scenario(out, names)
-    folder.prepare(cfg.to_dict())  # a killed worker's half-written episode goes
+    folder.prepare(settings)  # a killed worker's half-written episode goes
     if scenarios is not None:
         write_text_atomic(out / SCENARIO_FILE, to_json(scenarios, indent=1) + "\n")
     if reward is not None:

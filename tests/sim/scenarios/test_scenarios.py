@@ -469,30 +469,45 @@ def test_environment_variable_loads_files_on_demand(clean_registry, tmp_path, mo
 def test_bad_scenario_files_are_refused_with_a_house_message(
     clean_registry, tmp_path, content, needles
 ):
+    """A file's structure, names and bases are checked when it is loaded (a refused file
+    registers nothing); a variant's layout when it is first used."""
     sc = clean_registry
     before = sc.scenario_names()
-    with pytest.raises(ScenarioError) as err:
-        sc.load_scenario_file(_write(tmp_path, content))
-    assert_house_message(str(err.value), *needles)
-    assert sc.scenario_names() == before
+    try:
+        names = sc.load_scenario_file(_write(tmp_path, content))
+    except ScenarioError as exc:
+        message = str(exc)
+        assert sc.scenario_names() == before
+    else:
+        with pytest.raises(ScenarioError) as err:
+            sc.get_scenario(names[0])
+        message = str(err.value)
+    assert_house_message(message, *needles)
 
 
-def test_a_bad_entry_registers_nothing_and_a_missing_file_is_named(clean_registry, tmp_path):
+def test_a_variant_is_checked_when_first_used_and_a_missing_file_is_named(clean_registry, tmp_path):
+    """A file of many variants costs its parse: a variant's layout and the placement of its
+    start states are checked when it is first used, and the error names the file and it."""
     sc = clean_registry
     data = {
         "format": "pioneer.scenarios/1",
-        "scenarios": {"good": {"elevator": {}}, "bad": {"elevator": {"door_width": 9.0}}},
+        "scenarios": {
+            "good": {"elevator": {}},
+            "bad": {"elevator": {"door_width": 9.0}},
+            "tight": {"elevator": {"n_boarding": 3, "lobby_depth": 2.0}},
+            "short": {"static": {"length": 5.0}},  # start row 0.1 m off the wall
+        },
     }
-    with pytest.raises(ScenarioError):
-        sc.load_scenario_file(_write(tmp_path, data))
-    assert "good" not in sc.scenario_names()  # all or nothing
-    data["scenarios"] = {"tight": {"elevator": {"n_boarding": 3, "lobby_depth": 2.0}}}
-    with pytest.raises(ScenarioError) as err:  # fits for most start states, not for all
-        sc.load_scenario_file(_write(tmp_path, data))
-    assert_house_message(str(err.value), "'tight'", "seed", "collision-free")
-    data["scenarios"] = {"short": {"static": {"length": 5.0}}}  # start row 0.1 m off the wall
+    sc.load_scenario_file(_write(tmp_path, data))
+    assert sc.get_scenario("good").name == "good"
     with pytest.raises(ScenarioError) as err:
-        sc.load_scenario_file(_write(tmp_path, data))
+        sc.get_scenario("bad")
+    assert_house_message(str(err.value), "variants.json", "'bad'", "door_width")
+    with pytest.raises(ScenarioError) as err:  # fits for most start states, not for all
+        sc.get_scenario("tight")
+    assert_house_message(str(err.value), "'tight'", "seed", "collision-free")
+    with pytest.raises(ScenarioError) as err:
+        sc.get_scenario("short")
     assert_house_message(str(err.value), "variants.json", "'short'", "robot_start")
     with pytest.raises(ScenarioError) as err:
         sc.load_scenario_file(tmp_path / "missing.json")
@@ -549,15 +564,15 @@ def test_every_refused_variant_of_a_file_is_reported_at_once(clean_registry, tmp
         "format": "pioneer.scenarios/1",
         "scenarios": {
             "fine": {"elevator": {}},
-            "narrow": {"elevator": {"lobby_width": 0.5}},
-            "crowd": {"elevator": {"n_boarding": -1}},
+            "narrow": {"lobby": {"lobby_width": 0.5}},
+            "crowd": {"elevator": {"n_boarding": 2}, "base": "hq"},
         },
     }
     with pytest.raises(ScenarioError) as err:
         sc.load_scenario_file(_write(tmp_path, data))
     msg = str(err.value)
     assert "2 variants refused" in msg and "\n" not in msg
-    assert_house_message(msg, "'narrow'", "lobby_width", "'crowd'", "n_boarding")
+    assert_house_message(msg, "'narrow'", "lobby", "'crowd'", "hq")
     assert "'fine'" not in msg and "fine" not in sc.scenario_names()
 
 

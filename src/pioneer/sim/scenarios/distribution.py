@@ -17,25 +17,34 @@ seed), is redrawn, and counted.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 from typing import Annotated, Any, cast
 
 import numpy as np
 from annotated_types import MinLen
 
 from pioneer.bounds import NonNegative, NonNegativeInt, UnitInterval
-from pioneer.config import Config, Ordered
+from pioneer.config import Config, Ordered, check_count
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
 from pioneer.io import check_name
 from pioneer.sim.scenarios.layouts import ElevatorLayout, HumanSide, elevator_scenario
 from pioneer.sim.scenarios.registry import PLACEMENT_CHECK_SEEDS, check_placement
 from pioneer.sim.world import SimConfig
 
-__all__ = ["MIN_PLACEMENT_RATE", "LayoutDistribution", "sample_layout", "sample_variants"]
+__all__ = [
+    "MAX_LAYOUTS",
+    "MIN_PLACEMENT_RATE",
+    "LayoutDistribution",
+    "draw_variants",
+    "sample_layout",
+    "sample_variants",
+]
 
 Range = Annotated[tuple[NonNegative, NonNegative], Ordered()]  # 0 <= low <= high
 Counts = Annotated[tuple[NonNegativeInt, NonNegativeInt], Ordered()]  # 0 <= low <= high, inclusive
 PAPER = ElevatorLayout()  # the paper world: the reference of the proportions
 MAX_DRAWS = 50  # draws per accepted layout before giving up
+MAX_LAYOUTS = 100_000  # layouts one call may draw (a scenario file of ≈ 20 MB)
 # A kept layout must place its bodies in at least this share of start-state draws (estimated
 # on the start seeds a scenario file is checked with). A start state gives up after
 # spec.MAX_TRIES = 2000 draws; at a true rate of 1 % that happens once in e^20 episodes,
@@ -142,20 +151,39 @@ def sample_variants(
 ) -> tuple[dict[str, dict[str, Any]], int]:
     """``n`` valid layouts drawn from ``seed`` as scenario-file entries ``{name: entry}``, and
     the number of draws rejected because their bodies could not be placed."""
+    variants: dict[str, dict[str, Any]] = {}
+    rejected = 0
+    for name, entry, so_far in draw_variants(dist, n, seed, prefix):
+        variants[name], rejected = entry, so_far
+    return variants, rejected
+
+
+def draw_variants(
+    dist: LayoutDistribution, n: int, seed: int, prefix: str = "general"
+) -> Iterator[tuple[str, dict[str, Any], int]]:
+    """The ``n`` valid layouts of :func:`sample_variants` one at a time, as they are drawn:
+    ``(name, scenario-file entry, draws rejected so far)``. ``n`` is checked against
+    :data:`MAX_LAYOUTS` and the prefix at once, before the first draw."""
     if n < 1:
         raise ScenarioError(expect("layouts to draw", "n >= 1", n, "ask for at least one"))
+    check_count("layouts to draw (--n)", n, MAX_LAYOUTS, "ask for fewer, in several files")
     try:  # the variants' names are PREFIX-0000, …: file names in the runs that use them
         check_name("layout name prefix (--prefix)", prefix)
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
+    return _draws(dist, n, seed, prefix)
+
+
+def _draws(
+    dist: LayoutDistribution, n: int, seed: int, prefix: str
+) -> Iterator[tuple[str, dict[str, Any], int]]:
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
-    variants: dict[str, dict[str, Any]] = {}
     rejected = 0
     budget = PLACEMENT_CHECK_SEEDS / MIN_PLACEMENT_RATE  # [draws] beyond it the rate is too low
-    while len(variants) < n:
+    for index in range(n):
         for _ in range(MAX_DRAWS):
             layout, sim = sample_layout(dist, rng)
-            name = f"{prefix}-{len(variants):04d}"
+            name = f"{prefix}-{index:04d}"
             try:
                 draws = check_placement(name, elevator_scenario(layout, sim=sim, name=name), budget)
             except PioneerError:
@@ -164,11 +192,12 @@ def sample_variants(
             if draws > budget:
                 rejected += 1  # placeable for these seeds, but too tight to be sure for all
                 continue
-            variants[name] = {
+            entry = {
                 "elevator": _changed(layout, ElevatorLayout()) | {"human_side": layout.human_side},
                 "sim": _changed(sim, SimConfig()),
                 "base": "hr-rl" if layout.human_side == "right" else "hl-rr",
             }
+            yield name, entry, rejected
             break
         else:
             raise ScenarioError(
@@ -179,4 +208,3 @@ def sample_variants(
                     "widen the lobby ranges or shrink the humans",
                 )
             )
-    return variants, rejected

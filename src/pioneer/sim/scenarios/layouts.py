@@ -11,7 +11,7 @@ from annotated_types import Interval
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, Span
 from pioneer.config import Config
-from pioneer.errors import ScenarioError, expect
+from pioneer.errors import ConfigError, ScenarioError, expect
 from pioneer.sim.scenarios.spec import HumanSpec, Point, Region, ScenarioConfig, Segment
 from pioneer.sim.world import SimConfig
 
@@ -247,6 +247,19 @@ def elevator_scenario(
         x=(-(hw_c - r_r - 0.15), -min(hw_c - r_r - 0.15, 0.45)), y=(1.0, depth - r_r - 0.2)
     )
     robot_y = lay.robot_start_y or (-ld + 0.25, -(r_r + 0.35))
+    try:  # the humans' regions derive from their size: name it, not a derived region
+        humans = (*_boarders(lay, r_r, side), *_exiting(lay, side))
+    except ConfigError as exc:
+        raise ScenarioError(
+            expect(
+                "ElevatorLayout.human_radius",
+                f"people who fit the cabin ({lay.cabin_width:g} × {depth:g} m) and the lobby "
+                f"({lay.lobby_width:g} × {ld:g} m) with margin {m:g} m (their start and goal "
+                "regions come out empty)",
+                lay.human_radius,
+                "shrink human_radius or margin, or enlarge the cabin or the lobby",
+            )
+        ) from exc
     return ScenarioConfig(
         name=name or ("hr-rl" if side > 0 else "hl-rr"),
         walls=_elevator_walls(lay),
@@ -254,7 +267,7 @@ def elevator_scenario(
         robot_start=Region(x=(-sx, sx), y=robot_y),
         robot_goal=goal if side > 0 else goal.mirrored(),
         robot_heading=(math.pi / 2 - 0.15, math.pi / 2 + 0.15),
-        humans=(*_boarders(lay, r_r, side), *_exiting(lay, side)),
+        humans=humans,
         min_start_gap=lay.min_start_gap,
         sim=sim,
     )

@@ -14,7 +14,7 @@ import numpy as np
 
 from pioneer.config import Config
 from pioneer.errors import ConfigError, PioneerError, ScenarioError, expect
-from pioneer.io import check_name
+from pioneer.io import check_name, read_text_bounded
 from pioneer.laser import LidarConfig
 from pioneer.sim.humans import SocialForceConfig
 from pioneer.sim.scenarios.layouts import (
@@ -175,7 +175,8 @@ _KINDS: dict[str, tuple[type[Config], Callable[..., ScenarioConfig]]] = {
     "static": (StaticStudyLayout, static_study_scenario),
 }
 _ENV_LOADED: str | None = None  # the value of SCENARIOS_ENV whose files are registered
-PLACEMENT_CHECK_SEEDS = 50  # start states drawn per variant when a scenario file is loaded
+PLACEMENT_CHECK_SEEDS = 50  # start states drawn per variant when it is first used
+MAX_SCENARIO_FILE_BYTES = 64 * 2**20  # a scenario file's size limit (≈ 300,000 variants)
 
 
 def _scenario_factory(
@@ -189,6 +190,30 @@ def _scenario_factory(
         return build(lay, sim=sim_cfg).replace(name=name)
 
     return factory
+
+
+class _FileVariant:
+    """The factory of a scenario file's variant, checked when it is first used — its layout,
+    settings and the placement of its start states (:func:`check_placement`) — and kept: a
+    file of many variants costs its parse, not a check of each (errors name the file and the
+    variant)."""
+
+    def __init__(self, where: str, name: str, kind: str, entry: dict[str, Any]) -> None:
+        self.where, self.name, self.kind, self.entry = where, name, kind, entry
+        self.config: ScenarioConfig | None = None
+
+    def __call__(self) -> ScenarioConfig:
+        if self.config is None:
+            try:
+                factory = _scenario_factory(
+                    self.name, self.kind, self.entry[self.kind], self.entry.get("sim")
+                )
+                cfg = factory()
+            except PioneerError as exc:
+                raise ScenarioError(f"{self.where}: {exc}") from exc
+            check_placement(self.where, cfg)
+            self.config = cfg
+        return self.config
 
 
 def load_scenario_file(path: str | Path) -> list[str]:
@@ -207,19 +232,21 @@ def load_scenario_file(path: str | Path) -> list[str]:
     defaults. An optional ``"base": "hr-rl"`` lets the variant use that built-in scenario's
     shipped demos (the teacher's default reward) and shipped students. Episode seeds derive
     from the scenario *name*, so a variant evaluated twice under one name gets the same
-    episodes. Each variant must place its bodies for the start-state seeds 0–49 (a layout
-    that is too tight for some draws is refused here rather than halfway through a run).
+    episodes. The file is read only if it is a regular UTF-8 file of at most
+    :data:`MAX_SCENARIO_FILE_BYTES`, and every variant's name, family and base are checked
+    here; a variant's layout and settings are checked when it is first used
+    (:func:`get_scenario`), and it must place its bodies for the start-state seeds 0–49 (a
+    layout that is too tight for some draws is refused then, before a run starts, rather than
+    halfway through it).
     Put the file's path in the ``PIONEER_SCENARIOS`` environment variable (or pass
     ``pioneer --scenarios FILE``) so that worker processes register the variants too.
     """
     p = Path(path)
     fix = f"write a JSON object with 'format': {SCENARIO_FILE_FORMAT!r} and 'scenarios'"
     try:
-        data = json.loads(p.read_text())
-    except OSError as exc:
-        raise ScenarioError(
-            expect("scenario file", "a readable file", str(p), "check the path")
-        ) from exc
+        data = json.loads(read_text_bounded(p, "scenario file", MAX_SCENARIO_FILE_BYTES))
+    except PioneerError as exc:
+        raise ScenarioError(str(exc)) from None
     except json.JSONDecodeError as exc:
         raise ScenarioError(
             expect(f"scenario file {p}", "valid JSON", f"{exc.msg} at line {exc.lineno}", fix)
@@ -245,17 +272,19 @@ def load_scenario_file(path: str | Path) -> list[str]:
     if refused:
         listing = " | ".join(refused)
         raise ScenarioError(f"scenario file {p}: {len(refused)} variants refused: {listing}")
+    source = p.resolve()
     for name, factory in factories.items():  # all or nothing: register only a valid file
         _register(name, factory, bases[name])
-        _SOURCES[_key(name)] = p.resolve()
+        _SOURCES[_key(name)] = source
     return list(factories)
 
 
 def _load_variant(
     p: Path, name: str, entry: Any
 ) -> tuple[Callable[[], ScenarioConfig], str | None]:
-    """One variant of a scenario file, checked (its layout, settings, base and the placement
-    of its start states): its factory and base. Errors name the file and the variant."""
+    """One variant of a scenario file, its name, family and base checked: its factory (which
+    checks the rest when first called, :class:`_FileVariant`) and base. Errors name the file
+    and the variant."""
     where = f"scenario file {p}: {name!r}"
     _check_new_name(where, name)
     kinds = sorted(set(entry) & set(_KINDS)) if isinstance(entry, dict) else []
@@ -269,14 +298,8 @@ def _load_variant(
                 'e.g. {"elevator": {"lobby_depth": 2.8}}',
             )
         )
-    try:
-        factory = _scenario_factory(name, kinds[0], entry[kinds[0]], entry.get("sim"))
-        cfg = factory()  # build it once: placement errors name the file and variant
-    except PioneerError as exc:
-        raise ScenarioError(f"{where}: {exc}") from exc
-    check_placement(where, cfg)
     _check_base(where, entry.get("base"))
-    return factory, entry.get("base")
+    return _FileVariant(where, name, kinds[0], entry), entry.get("base")
 
 
 def load_env_scenarios() -> None:
