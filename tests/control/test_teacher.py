@@ -643,8 +643,9 @@ def test_an_impatient_teacher_decides_by_the_rule_terms_alone():
     assert not np.array_equal(patient.decide(world, state).scores, got.scores)
 
 
-def test_the_papers_teacher_has_no_patience():
+def test_no_teacher_is_patient_by_default():
     from pioneer.control.registry import build_policy
 
-    assert build_policy("teacher-paper", "hr-rl").config.patience.after == 0.0
-    assert build_policy("teacher", "hr-rl").config.patience == Patience()
+    for name in ("teacher", "teacher-paper"):
+        assert not build_policy(name, "hr-rl").config.patience.active
+    assert Patience().after == 0.0

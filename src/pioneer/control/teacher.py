@@ -147,9 +147,10 @@ class Patience(Config):
     margins, no learned term — until it makes progress again. The learned term was fitted
     where people walk 0.5–0.7 m/s and the margins were chosen in the paper world; where people
     are faster or do not queue, the two together make the teacher wait for a gap that never
-    comes (docs/teacher.md, "Patience")."""
+    comes. Off by default: measured, it does not lift those variants (docs/teacher.md,
+    "Patience")."""
 
-    after: NonNegative = 3.0  # [s] without progress before the teacher gives up its preferences
+    after: NonNegative = 0.0  # [s] without progress before it gives up its preferences (0: never)
     progress: Positive = 0.05  # [m] a shorter distance to the goal by this much is progress
 
     @property
@@ -180,8 +181,8 @@ class TeacherConfig(Config):
     # predicted to collide too, then drive the candidate that collides latest.
     fallback: Fallback = "evade"
     weights: RuleWeights = RuleWeights()
-    # Beyond the paper: the margins and the learned term given up after a while without
-    # progress (Patience; docs/teacher.md)
+    # Beyond the paper, off by default: the margins and the learned term given up after a
+    # while without progress (Patience; docs/teacher.md)
     patience: Patience = Patience()
 
     def candidates(self) -> F64:
