@@ -36,7 +36,7 @@ pytest: $(STAMP)
 	$(VENV)/bin/pytest -n 2 -q
 
 ## Build the wheels and the sdist, check them, and run the smoke test in fresh venvs from the
-## wheels (Python 3.11 with [learn], 3.13 without, the light runtime): tests/smoke/README.md.
+## wheels (Python 3.11 with [learn], 3.13 without, the light runtime): tests/smoke/dist.py.
 smoke: $(STAMP)
 	$(PY) tests/smoke/dist.py --out build/smoke
 
