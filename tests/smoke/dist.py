@@ -8,8 +8,8 @@
    the wheel and in the sdist; the runtime wheel holds exactly its modules.
 3. Fresh venvs (not editable), each running ``check.py`` or ``runtime_check.py`` beside this
    file: Python 3.11 with ``[learn]`` (pinned by ``constraints.txt``: torch's CPU build), the
-   newest Python (3.13) with the wheel alone, as a user's pip resolves it, and the runtime
-   wheel on 3.13 driving a student exported in the first venv.
+   newest Python (3.13) with the wheel alone, as a user's pip resolves it, side by side; then
+   the runtime wheel on 3.13 driving a student exported in the first venv.
 
 Prints one line per check and closes with ``smoke: N passed, N failed``; exit code 1 if any
 failed. Everything goes into ``--out`` (``build/smoke``), which is emptied first.
@@ -27,6 +27,7 @@ import shutil
 import subprocess
 import sys
 import tarfile
+import threading
 import time
 import tomllib
 import zipfile
@@ -42,11 +43,20 @@ MAIN = tomllib.loads((ROOT / "pyproject.toml").read_text())
 RUNTIME = tomllib.loads((ROOT / "runtime" / "pyproject.toml").read_text())
 
 
-class Smoke:
+class Job:
+    """Steps that run one after another; their lines are printed when asked (jobs run side
+    by side, each printed whole)."""
+
     def __init__(self, out: Path) -> None:
         self.out = out
         self.passed = 0
         self.failed = 0
+        self.lines: list[str] = []
+
+    def flush(self) -> None:
+        if self.lines:
+            print("\n".join(self.lines), flush=True)
+        self.lines = []
 
     def step(self, name: str, fn: Callable[[], str]) -> bool:
         t0 = time.perf_counter()
@@ -54,25 +64,26 @@ class Smoke:
             note = fn()
         except Exception as exc:  # one failed step is reported, the rest still run
             self.failed += 1
-            print(f"FAIL {name}: {exc}", flush=True)
+            self.lines.append(f"FAIL {name}: {exc}")
             return False
         self.passed += 1
-        print(f"ok   {name} ({time.perf_counter() - t0:.0f} s): {note}", flush=True)
+        self.lines.append(f"ok   {name} ({time.perf_counter() - t0:.0f} s): {note}")
         return True
 
-    def run(self, cmd: list[str], log: str, env: dict[str, str] | None = None) -> str:
+    def run(self, cmd: list[str], log: str) -> str:
         """Run ``cmd`` with its output in ``out/log``; raise with the log's tail if it fails."""
         path = self.out / log
         with path.open("w") as f:
-            proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env, check=False)
+            proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
         text = path.read_text()
         if proc.returncode != 0:
             tail = "\n".join(text.splitlines()[-30:])
             raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode} (log {path})\n{tail}")
         return text
 
-    def checks_in(self, name: str, python: Path, script: str, *args: str, log: str) -> None:
-        """Run a check script in a venv; its per-check lines are shown and counted."""
+    def checks_in(self, name: str, python: Path, script: str, *args: str) -> None:
+        """Run a check script in a venv; its per-check lines are kept and counted."""
+        t0 = time.perf_counter()
         proc = subprocess.run(
             [str(python), str(HERE / script), *args],
             capture_output=True,
@@ -80,14 +91,14 @@ class Smoke:
             cwd=self.out,
             check=False,
         )
-        (self.out / log).write_text(proc.stdout + proc.stderr)
+        (self.out / f"{name}-check.log").write_text(proc.stdout + proc.stderr)
         lines = proc.stdout.rstrip().splitlines()
         try:
             counts = json.loads(lines[-1])
         except (IndexError, ValueError):
             counts = {"passed": 0, "failed": 1}
-        print(f"{name}:", flush=True)
-        print("\n".join(lines[:-1]) or proc.stderr, flush=True)
+        self.lines.append(f"{name} smoke ({time.perf_counter() - t0:.0f} s):")
+        self.lines += lines[:-1] or proc.stderr.splitlines()[-30:]
         self.passed += counts["passed"]
         self.failed += counts["failed"] + (proc.returncode != 0 and not counts["failed"])
 
@@ -215,72 +226,85 @@ def main() -> int:
     out = args.out.resolve()
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
-    smoke = Smoke(out)
     dist = out / "dist"
     t_start = time.perf_counter()
+    first = Job(out)
 
     def build() -> str:
-        smoke.run([sys.executable, "-m", "build", "--outdir", str(dist), str(ROOT)], "build.log")
-        smoke.run(
-            [
-                sys.executable,
-                "-m",
-                "build",
-                "--wheel",
-                "--outdir",
-                str(dist),
-                str(ROOT / "runtime"),
-            ],
-            "build-runtime.log",
-        )
+        first.run([sys.executable, "-m", "build", "--outdir", str(dist), str(ROOT)], "build.log")
+        runtime = [sys.executable, "-m", "build", "--wheel", "--outdir", str(dist)]
+        first.run([*runtime, str(ROOT / "runtime")], "build-runtime.log")
         return ", ".join(sorted(p.name for p in dist.iterdir()))
 
-    if not smoke.step("python -m build", build):
-        print(f"smoke: {smoke.passed} passed, {smoke.failed} failed")
+    built = first.step("python -m build", build)
+    if built:
+        first.step("pioneer-nav metadata and files", lambda: check_main_dist(dist))
+        first.step("pioneer-nav-runtime metadata and files", lambda: check_runtime_dist(dist))
+    first.flush()
+    if not built:
+        print(f"smoke: {first.passed} passed, {first.failed} failed")
         return 1
-    smoke.step("pioneer-nav metadata and files", lambda: check_main_dist(dist))
-    smoke.step("pioneer-nav-runtime metadata and files", lambda: check_runtime_dist(dist))
     wheel = next(dist.glob("pioneer_nav-*.whl"))
     runtime_wheel = next(dist.glob("pioneer_nav_runtime-*.whl"))
     onnx = out / "student.onnx"
-
-    def venv(version: str, name: str, requirement: str, pinned: bool) -> str:
-        """A fresh venv ``out/name`` of Python ``version`` with ``requirement`` installed."""
-        python = find_python(version)
-        where = out / name
-        smoke.run([str(python), "-m", "venv", str(where)], f"{name}-venv.log")
-        pip = [str(where / "bin" / "python"), "-m", "pip", "install"]
-        pip += ["-c", str(ROOT / "constraints.txt")] if pinned else []
-        smoke.run([*pip, "--upgrade", "pip"], f"{name}-pip.log")
-        smoke.run([*pip, requirement], f"{name}-install.log")
-        freeze = smoke.run([str(where / "bin" / "python"), "-m", "pip", "freeze"], f"{name}.txt")
-        picked = [
-            line for line in freeze.split() if line.startswith(("numpy==", "numba==", "torch=="))
-        ]
-        return f"{python} → {', '.join(picked)} (all: {name}.txt)"
-
     plain = args.python or ["3.13"]
-    jobs = [(args.learn_python, f"py{args.learn_python}-learn", f"{wheel}[learn]", True)]
-    jobs += [(version, f"py{version}", str(wheel), False) for version in plain]
-    for version, name, requirement, learn in jobs:
+
+    def venv(job: Job, version: str, name: str, requirement: str, pinned: bool) -> bool:
+        """A fresh venv ``out/name`` of Python ``version`` with ``requirement`` installed."""
+
+        def make() -> str:
+            python = find_python(version)
+            where = out / name
+            job.run([str(python), "-m", "venv", str(where)], f"{name}-venv.log")
+            pip = [str(where / "bin" / "python"), "-m", "pip", "install"]
+            pip += ["-c", str(ROOT / "constraints.txt")] if pinned else []
+            job.run([*pip, "--upgrade", "pip"], f"{name}-pip.log")
+            job.run([*pip, requirement], f"{name}-install.log")
+            freeze = job.run([str(where / "bin" / "python"), "-m", "pip", "freeze"], f"{name}.txt")
+            picked = [x for x in freeze.split() if x.startswith(("numpy==", "numba==", "torch=="))]
+            return f"{python} → {', '.join(picked)} (all: {name}.txt)"
+
         label = f"Python {version}: pip install {Path(requirement).name}"
-        label += " -c constraints.txt" if learn else ""
-        if smoke.step(label, lambda v=version, n=name, r=requirement, p=learn: venv(v, n, r, p)):
-            extra = ["--learn", "--onnx", str(onnx)] if learn else []
-            smoke.checks_in(
-                f"{name} smoke", out / name / "bin" / "python", "check.py",
-                "--tmp", str(out / f"{name}-tmp"), *extra, log=f"{name}-check.log",
-            )  # fmt: skip
-    label = f"Python {plain[-1]}: pip install {runtime_wheel.name}"
-    if smoke.step(label, lambda: venv(plain[-1], "runtime", str(runtime_wheel), False)):
-        smoke.checks_in(
-            "runtime smoke", out / "runtime" / "bin" / "python", "runtime_check.py",
-            "--onnx", str(onnx), log="runtime-check.log",
-        )  # fmt: skip
+        return job.step(label + (" -c constraints.txt" if pinned else ""), make)
+
+    def learn_job(job: Job) -> None:
+        """The wheel with [learn], pinned; it exports the student the runtime job drives."""
+        name = f"py{args.learn_python}-learn"
+        if venv(job, args.learn_python, name, f"{wheel}[learn]", pinned=True):
+            tmp = str(out / f"{name}-tmp")
+            python = out / name / "bin" / "python"
+            job.checks_in(name, python, "check.py", "--tmp", tmp, "--learn", "--onnx", str(onnx))
+
+    def plain_job(job: Job) -> None:
+        """The wheel alone, resolved as a user's pip would; then the runtime's venv."""
+        for version in plain:
+            name = f"py{version}"
+            if venv(job, version, name, str(wheel), pinned=False):
+                tmp = str(out / f"{name}-tmp")
+                job.checks_in(name, out / name / "bin" / "python", "check.py", "--tmp", tmp)
+        venv(job, plain[-1], "runtime", str(runtime_wheel), pinned=False)
+
+    jobs = [Job(out), Job(out)]
+    threads = [
+        threading.Thread(target=learn_job, args=(jobs[0],)),
+        threading.Thread(target=plain_job, args=(jobs[1],)),
+    ]
+    for thread in threads:
+        thread.start()
+    for thread, job in zip(threads, jobs, strict=True):
+        thread.join()
+        job.flush()
+    last = Job(out)
+    if (out / "runtime" / "bin" / "python").exists():
+        last.checks_in("runtime", out / "runtime" / "bin" / "python", "runtime_check.py",
+                       "--onnx", str(onnx))  # fmt: skip
+    last.flush()
+    passed = sum(j.passed for j in [first, *jobs, last])
+    failed = sum(j.failed for j in [first, *jobs, last])
     minutes = (time.perf_counter() - t_start) / 60
     print(f"(logs and venvs in {out}; {minutes:.1f} min)")
-    print(f"smoke: {smoke.passed} passed, {smoke.failed} failed")
-    return 1 if smoke.failed else 0
+    print(f"smoke: {passed} passed, {failed} failed")
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":
