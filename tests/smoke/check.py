@@ -16,9 +16,10 @@ import os
 import subprocess
 import sys
 import time
-import traceback
 from collections.abc import Callable
 from pathlib import Path
+
+from checks import run_checks  # beside this file
 
 BIN = Path(sys.executable).parent
 PIONEER = str(BIN / "pioneer")
@@ -153,19 +154,7 @@ def main() -> int:
         checks.append(("student from the shipped weights", check_student))
         if args.onnx:
             checks.append(("pioneer export (ONNX)", lambda: check_export(args.onnx)))
-    passed = failed = 0
-    for name, check in checks:
-        t0 = time.perf_counter()
-        try:
-            note = check()
-        except Exception:
-            failed += 1
-            print(f"  FAIL {name}\n" + traceback.format_exc(), flush=True)
-        else:
-            passed += 1
-            print(f"  ok   {name} ({time.perf_counter() - t0:.1f} s): {note}", flush=True)
-    print(json.dumps({"passed": passed, "failed": failed}))
-    return 1 if failed else 0
+    return run_checks(checks)
 
 
 if __name__ == "__main__":

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import math
 import os
 import sys
-import time
-import traceback
 from collections.abc import Callable
 from pathlib import Path
+
+from checks import run_checks  # beside this file
 
 HEAVY = ("torch", "numba", "scipy", "matplotlib", "gymnasium", "tyro", "onnx")
 
@@ -57,19 +56,7 @@ def main() -> int:
         ("installed alone, light", check_light),
         ("student runtime on an exported student", lambda: check_student(onnx)),
     ]
-    passed = failed = 0
-    for name, check in checks:
-        t0 = time.perf_counter()
-        try:
-            note = check()
-        except Exception:
-            failed += 1
-            print(f"  FAIL {name}\n" + traceback.format_exc(), flush=True)
-        else:
-            passed += 1
-            print(f"  ok   {name} ({time.perf_counter() - t0:.1f} s): {note}", flush=True)
-    print(json.dumps({"passed": passed, "failed": failed}))
-    return 1 if failed else 0
+    return run_checks(checks)
 
 
 if __name__ == "__main__":
