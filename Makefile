@@ -4,14 +4,15 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench clean clean-cache
+.PHONY: demo test lint typecheck pytest smoke bench clean clean-cache
 
-$(STAMP): pyproject.toml
+# The package states ranges (pyproject.toml); the exact versions installed here, torch's CPU
+# build among them, are in constraints.txt.
+$(STAMP): pyproject.toml constraints.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@echo "installing into $(VENV) (pip's output: $(VENV)/install.log)"
-	@{ $(PY) -m pip install --upgrade "pip>=24" \
-	  && $(PY) -m pip install "torch==2.13.0" \
-	  && $(PY) -m pip install -e ".[dev,bench]"; } > $(VENV)/install.log 2>&1 \
+	@{ $(PY) -m pip install -c constraints.txt --upgrade pip \
+	  && $(PY) -m pip install -c constraints.txt -e ".[dev,bench]"; } > $(VENV)/install.log 2>&1 \
 	  || { tail -n 40 $(VENV)/install.log; echo "install failed: see $(VENV)/install.log"; exit 1; }
 	@touch $(STAMP)
 
@@ -34,6 +35,11 @@ typecheck: $(STAMP)
 pytest: $(STAMP)
 	$(VENV)/bin/pytest -n 2 -q
 
+## Build the wheels and the sdist, check them, and run the smoke test in fresh venvs from the
+## wheels (Python 3.11 with [learn], 3.13 without, the light runtime): tests/smoke/dist.py.
+smoke: $(STAMP)
+	$(PY) tests/smoke/dist.py --out build/smoke
+
 ## Performance benchmarks; medians go to benchmarks/results/ and docs/performance.md.
 bench: $(STAMP)
 	$(PY) benchmarks/run.py
@@ -43,4 +49,4 @@ clean-cache:
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
 
 clean: clean-cache
-	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) out build dist .pytest_cache .mypy_cache .ruff_cache

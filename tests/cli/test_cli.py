@@ -79,6 +79,16 @@ def test_missing_subcommand_is_a_usage_error(capsys):
     assert "usage" in capsys.readouterr().err
 
 
+def test_version_prints_the_packages_version(capsys):
+    from importlib.metadata import version
+
+    from pioneer import __version__
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"pioneer {__version__}\n"
+    assert version("pioneer-nav") == __version__  # the metadata's version is read from it
+
+
 def _console_commands():
     cmds = [[sys.executable, "-m", "pioneer.cli"]]
     script = Path(sys.executable).with_name("pioneer")

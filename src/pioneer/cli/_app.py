@@ -6,7 +6,8 @@ modules import what the defaults are read from (torch for ``distill``, the simul
 ``eval``), so only the chosen command's module is imported: the command line is parsed in
 two steps, both by tyro. The tree (``pioneer [--scenarios FILE] COMMAND``, with ``--help``
 listing the commands) is parsed with a placeholder per command, then the command's own
-options, as ``pioneer eval …`` (its ``--help`` lists its defaults).
+options, as ``pioneer eval …`` (its ``--help`` lists its defaults). ``pioneer --version``
+alone prints the version.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class _Group:
 
 
 _TREE = _Group(
-    "PioneeR social navigation toolkit",
+    "PioneeR social navigation toolkit (pioneer --version: its version)",
     {
         "run": _Leaf("evaluation:Run", "run one episode of a policy; optionally write a GIF/PNG"),
         "scenarios": _Leaf(
@@ -267,6 +268,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT / SIGTERM into one line naming what was kept and the command that resumes, exit
     code 130 / 143 (:mod:`pioneer.interrupt`)."""
     args = list(sys.argv[1:] if argv is None else argv)
+    if args == ["--version"]:
+        from pioneer import __version__
+
+        print(f"pioneer {__version__}")
+        return 0
     try:
         command, scenario_files = _parse(args)
         _single_threaded_blas()
