@@ -15,6 +15,7 @@ from pioneer.experiments.reproduce import (
     BASELINES,
     CLASSIC,
     PAPER_STUDENT,
+    PAPER_TEACHERS,
     SCENARIOS,
     SHIELD,
     STUDENTS,
@@ -40,7 +41,7 @@ def test_every_row_is_evaluated_once(smoke: Path) -> None:
     recs = read_records(smoke / "eval" / "episodes.jsonl")
     rows = {(r["scenario"], r["policy"]) for r in recs}
     student_rows = [p.row for p in student_specs()]
-    rows_i = (*TEACHERS, *BASELINES, *CLASSIC, *student_rows, SHIELD)
+    rows_i = (*PAPER_TEACHERS, *TEACHERS, *BASELINES, *CLASSIC, *student_rows, SHIELD)
     expected = {(sc, p) for sc in SCENARIOS for p in rows_i}
     assert rows == expected
     assert len(recs) == len(expected)  # 1 seed × 1 trial each
@@ -65,6 +66,29 @@ def test_the_report_has_tables_i_to_iv_and_its_figures(smoke: Path) -> None:
         assert (smoke / "figures" / fig).stat().st_size > 0
     for name in ("summary.json", "summary.md", "summary.csv"):
         assert (smoke / name).stat().st_size > 0
+
+
+def test_tables_i_and_ii_carry_the_papers_teacher_and_ours(smoke: Path) -> None:
+    """Table II: the paper's teacher and its three ablations (the rows with the paper's values)
+    and ours with its three; Table I: both teachers."""
+    index = (smoke / "index.md").read_text()
+    table_ii = index.split("**Table II")[1].split("**Table III")[0]
+    for sc in SCENARIOS:
+        rows = [
+            line.split(" | ")[1]
+            for line in table_ii.splitlines()
+            if line.startswith(f"| {sc.upper()} |")
+        ]
+        assert rows == [*PAPER_TEACHERS, *TEACHERS]
+    paper_cells = {
+        line.split(" | ")[1]: line.split(" | ")[5]
+        for line in table_ii.splitlines()
+        if line.startswith("| HR-RL |")
+    }
+    assert paper_cells["teacher-paper-no-density"] == "83.0 / 13.61 / 4.55"
+    assert paper_cells["teacher-no-density"] == "–"  # ours: no paper value beside it
+    table_i = index.split("**Table I —")[1].split("**Table II")[0]
+    assert "| HR-RL | teacher-paper | " in table_i and "| HR-RL | teacher | " in table_i
 
 
 def test_the_report_has_the_social_measures_and_their_figures(smoke: Path) -> None:
@@ -240,4 +264,4 @@ def test_the_report_says_where_the_time_went(smoke: Path) -> None:
         assert f"| {row} | {part} | {n} | {sec / 60:.1f} |" in section
     paper = sum(sec for row, (_, sec) in times.items() if row in PAPER_ROWS)
     assert f"The paper's rows (Tables I–IV) ran {paper / 60:.1f} CPU-min" in section
-    assert set(PAPER_ROWS) == {*TEACHERS, *BASELINES, *STUDENTS}
+    assert set(PAPER_ROWS) == {*PAPER_TEACHERS, *BASELINES, *STUDENTS}

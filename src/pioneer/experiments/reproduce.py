@@ -64,15 +64,24 @@ PROFILES = {
     "paper": Profile(seeds=5, trials=100),
 }
 SCENARIOS = ("hr-rl", "hl-rr")
+# paper Tables I–II: the paper's teacher (no soft margins, the stop fallback) and its ablations,
+# the rows compared with the paper; beside them ours (soft margins in tiers, the evade
+# fallback: docs/teacher.md), the teacher the students imitate, and its ablations
+PAPER_TEACHERS = (
+    "teacher-paper",
+    "teacher-paper-no-density",
+    "teacher-paper-no-goal",
+    "teacher-paper-no-obstacle",
+)
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
 PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
-# beyond the paper, in Table I: the teacher without its soft margins (the paper's), classic
-# references and Stable-Baselines3's PPO with its defaults on the environment's own reward
-CLASSIC = ("teacher-paper", "dwa", "sfm", "goal", "sb3-ppo")
-PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
+# beyond the paper, in Table I: classic references and Stable-Baselines3's PPO with its
+# defaults on the environment's own reward
+CLASSIC = ("dwa", "sfm", "goal", "sb3-ppo")
+PAPER_ROWS = (*PAPER_TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 SEED_ROW = "{name}-s{seed}"  # the row of a student's other DAgger seeds (seed 0: its name)
 # uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
 UNCERTAINTY_KEY = f"threshold_{RISKY_DISTANCE_M:g}m"
@@ -278,7 +287,7 @@ def _reproduce(
     t0 = time.perf_counter()
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
-    policies = [PolicySpec.make(name, reward=reward_tpl) for name in TEACHERS]
+    policies = [PolicySpec.make(name, reward=reward_tpl) for name in (*PAPER_TEACHERS, *TEACHERS)]
     extra = [PolicySpec.make(name) for name in (*BASELINES, *CLASSIC)] + list(extra_policies)
     students = student_specs()
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
@@ -305,9 +314,19 @@ def _reproduce(
                 "I",
                 "Table I — navigation performance",
                 SCENARIOS,
-                ["teacher", *[p.row for p in extra]],
+                [
+                    "teacher-paper",
+                    *BASELINES,
+                    "teacher",
+                    *[p.row for p in extra if p.row not in BASELINES],
+                ],
             ),
-            ("II", "Table II — ablation of the reward terms", SCENARIOS, list(TEACHERS)),
+            (
+                "II",
+                "Table II — ablation of the reward terms",
+                SCENARIOS,
+                [*PAPER_TEACHERS, *TEACHERS],
+            ),
             (
                 "III",
                 "Table III — distilled students (shipped DAgger checkpoints) and the "
@@ -634,9 +653,11 @@ def _index(
         f"{profile}{'' if seed_set == 'evaluation' else ' --seed-set ' + seed_set}`.",
         "",
         "The CrowdNav++ and SB3 PPO rows (Table I) are the shipped weights; how they were "
-        "trained: src/pioneer/data/baselines/README.md. The teacher keeps "
-        "soft margins to people and walls (docs/teacher.md); `teacher-paper` is the "
-        "teacher without them.",
+        "trained: src/pioneer/data/baselines/README.md. Tables I–II: `teacher-paper` and "
+        "`teacher-paper-no-*` are the paper's teacher and its ablations (no soft margins; "
+        "it stops when no command is feasible), the rows compared with the paper; `teacher` "
+        "and `teacher-no-*` are ours, which the students imitate: soft margins to people "
+        "and walls and the evade fallback (docs/teacher.md).",
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
         "95% confidence intervals: [summary.json](summary.json); tables as CSV: "
