@@ -7,9 +7,12 @@ After a paper-profile run on the reference machine (docs/performance.md)::
 
 writes every policy row's mean wall time of one episode (over both scenarios and every
 invocation of a resumed run) into ``src/pioneer/data/episode_times.json``, with the date of
-the run and the machine it ran on. Rows the run did not evaluate keep their earlier figures.
-``--scale F`` divides the measured times by F, for a run on a host F times slower than the
-reference (say why with ``--note``); the notes of the earlier file are replaced.
+the run, the machine it ran on and that machine's speed (``probe_s``: the time probe of
+:mod:`pioneer.experiments.timing`, measured here, on the machine of the run, by this script),
+which the announced time of any other machine is scaled by. Rows the run did not evaluate
+keep their earlier figures. ``--scale F`` divides the measured times by F, for a run that
+other work on the machine slowed F times (the probe, timed by its fastest rounds, measures
+the CPU itself; say why with ``--note``); the notes of the earlier file are replaced.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pioneer.data import EPISODE_TIMES
 from pioneer.eval.harness import EPISODES_FILE, read_records
-from pioneer.experiments.reproduce import EpisodeTimes, load_episode_times, row_times
+from pioneer.experiments.timing import EpisodeTimes, load_episode_times, probe_seconds, row_times
 from pioneer.io import write_text_atomic
 
 
@@ -63,9 +66,11 @@ def updated(
     machine: str,
     scale: float = 1.0,
     notes: tuple[str, ...] = (),
+    probe_s: float | None = None,
 ) -> EpisodeTimes:
     """``old`` with the rows of ``records`` re-measured; the others are kept, and a note
-    says so. ``notes`` replace the old ones."""
+    says so. ``notes`` replace the old ones; ``probe_s`` (this machine's probe time) replaces
+    the old one when given."""
     new = measured(records, scale)
     kept = sorted(set(old.episode_s) - set(new))
     if kept:
@@ -75,7 +80,7 @@ def updated(
         "(the report's 'Where the time went')"
     )
     if scale != 1.0:
-        source += f", divided by {scale:g} (a host that much slower than the reference)"
+        source += f", divided by {scale:g} (a run that other work slowed that much)"
     return dataclasses.replace(
         old,
         episode_s={**old.episode_s, **new},
@@ -83,6 +88,7 @@ def updated(
         machine=machine,
         source=source,
         notes=notes,
+        probe_s=old.probe_s if probe_s is None else probe_s,
     )
 
 
@@ -109,11 +115,12 @@ def main(argv: list[str] | None = None) -> int:
         machine_line(),
         args.scale,
         tuple(args.note),
+        probe_seconds(),
     )
     write_text_atomic(args.output, json.dumps(times.to_dict(), indent=2) + "\n")
     for row in sorted(measured(records)):
         print(f"{row:24s} {times.of(row):.3f} s")
-    print(f"wrote {args.output} (measured {times.measured})")
+    print(f"wrote {args.output} (measured {times.measured}, probe {times.probe_s:.5f} s)")
     return 0
 
 
