@@ -92,9 +92,13 @@ def test_other_work_on_the_cpus_slows_the_run():
     idle = _estimate(load=1.0)  # this process alone
     one_busy = _estimate(load=2.0)  # one CPU kept busy by another process
     assert one_busy.busy == pytest.approx(1.0)
-    # 3 runnable processes on 2 CPUs: our 2 workers get 2 × 2/3 of a CPU
+    # 3 running processes on 2 CPUs: our 2 workers get 2 × 2/3 of a CPU
     assert one_busy.paper_s == pytest.approx(idle.paper_s * 3 / 2)
+    # 8 others beside our 2 workers: a fifth of the 2 CPUs each
+    assert _estimate(load=9.0).paper_s == pytest.approx(idle.paper_s * 10 / 2)
     assert _estimate(load=0.2).paper_s == pytest.approx(idle.paper_s)
+    # one worker on 2 CPUs beside one other process: a CPU of its own
+    assert _estimate(workers=1, load=2.0).paper_s == pytest.approx(_estimate(workers=1).paper_s)
 
 
 def test_a_cold_numba_cache_adds_the_compile_scaled_by_speed():
@@ -111,11 +115,26 @@ def test_the_announcement_is_one_line_under_300_characters(monkeypatch, busy):
     assert "\n" not in line and len(line) < 300
     assert line.startswith("pioneer reproduce --profile paper: 123,456 episodes (12,345 done)")
     assert "expected ≈ 31 min (paper's rows 10, others 21, start-up and report 1)" in line
-    assert "on 2 CPU(s) for 64 worker(s)" in line
-    assert ("1.7 CPUs busy with other work" in line) == (busy > 0)
-    assert "0.43× the speed of the one timed (A CPU (zen))" in line
+    assert "with 64 worker(s) on 2 CPU(s)" in line
+    assert (", ≈ 1.7 other busy processes" in line) == (busy > 0)
+    assert line.endswith("; CPU speed 0.43× A CPU (zen)'s")
     short = announcement("quick", 960, 0, timing.Estimate(30.0, 20.0, 15.0, 2, 2, 0.0, 1.0))
     assert "expected ≈ 1.1 min (paper's rows 0.5, others 0.3" in short
+
+
+def test_the_announcement_stays_short_with_any_machine_and_size(monkeypatch):
+    long_name = "Intel(R) Xeon(R) Platinum 8375C CPU @ 2.90GHz (icelake-server: avx), 16 CPUs"
+    monkeypatch.setattr(timing, "episode_times", lambda: dataclasses_replace(long_name))
+    est = timing.Estimate(6e5, 6e5, 1e4, 1024, 1024, 123.4, 12.34)
+    line = announcement("paper", 12_345_678, 12_345_677, est)
+    assert len(line) < 300 and "…'s" in line
+
+
+def dataclasses_replace(machine: str) -> EpisodeTimes:
+    """:data:`TIMES` measured on ``machine``."""
+    import dataclasses
+
+    return dataclasses.replace(TIMES, machine=machine)
 
 
 def test_the_probe_is_short_and_positive():

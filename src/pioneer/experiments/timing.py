@@ -8,8 +8,8 @@ things carry them to another (docs/performance.md, "The announced time"):
   rules-only teacher decisions (well under a second), and the stored times are scaled by its
   ratio to the same probe on the machine that measured them (``probe_s`` in the file);
 - **the workers it will really use**: ``min(workers, CPUs)`` — more workers than CPUs only
-  share them — at the parallel efficiency :func:`parallel_speed` states, and fewer when other
-  work keeps the CPUs busy (the one-minute load average).
+  share them — at the parallel efficiency :func:`parallel_speed` states, and a fair share of
+  the CPUs when other processes keep them busy (the one-minute load average).
 """
 
 from __future__ import annotations
@@ -234,7 +234,7 @@ class Estimate:
     fixed_s: float  # [s] start-up (and compiling the kernels) and the report
     workers: int  # worker processes asked for
     cores: int  # the CPUs they run on: min(workers, CPUs)
-    busy: float  # CPUs kept busy by other work (the load average beyond this process)
+    busy: float  # other processes running beside this one (the load average less this one)
     speed: float  # the stored machine's probe time ÷ this one's (1: as fast; 0.5: half)
 
     @property
@@ -268,9 +268,9 @@ def estimate(
     if load is None:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 1.0
     cores = max(1, min(workers, cpus))
-    busy = min(max(load - 1.0, 0.0), float(cpus))  # this process is one of the load's
+    busy = max(load - 1.0, 0.0)  # this process is one of the load's
     # the CPUs' share our workers get beside the other work (each runnable process an equal one)
-    share = min(1.0, cpus / (busy + cores)) if busy + cores > cpus else 1.0
+    share = min(1.0, cpus / (busy + cores))
     rate = parallel_speed(cores) * share * speed  # stored episode-seconds per second
 
     def wall(rows: Sequence[str]) -> float:
@@ -288,11 +288,13 @@ def announcement(profile: str, episodes: int, done: int, est: Estimate) -> str:
     def minutes(sec: float) -> str:
         return f"{sec / 60:.{digits}f}"
 
-    shared = f", {est.busy:.1f} CPUs busy with other work" if est.busy >= 0.5 else ""
+    shared = f", ≈ {est.busy:.1f} other busy processes" if est.busy >= 0.5 else ""
+    machine = times.machine_short()
+    machine = machine if len(machine) <= 40 else machine[:39] + "…"
     return (
         f"pioneer reproduce --profile {profile}: {episodes:,} episodes ({done:,} done), expected "
         f"≈ {minutes(est.total_s)} min (paper's rows {minutes(est.paper_s)}, others "
-        f"{minutes(est.extra_s)}, start-up and report {minutes(est.fixed_s)}) on "
-        f"{est.cores} CPU(s) for {est.workers} worker(s){shared}; this CPU "
-        f"{est.speed:.2f}× the speed of the one timed ({times.machine_short()})"
+        f"{minutes(est.extra_s)}, start-up and report {minutes(est.fixed_s)}) with "
+        f"{est.workers} worker(s) on {est.cores} CPU(s){shared}; CPU speed {est.speed:.2f}× "
+        f"{machine}'s"
     )
