@@ -64,6 +64,12 @@ class Recorder:
         return u
 
 
+def _mean(values: list[float]) -> float:
+    """The mean of the finite ``values`` (NaN when there is none)."""
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.mean(finite)) if finite else math.nan
+
+
 def main() -> None:
     """Run, print the table, plot two timed-out episodes."""
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
@@ -90,8 +96,8 @@ def main() -> None:
                 "least": float(dist.min()),
                 "start": start,
                 "alpha_tail": float(np.mean(tail)) if tail else math.nan,
-                "density_tail": float(np.nanmean([r["density"] for r in policy.rows[-steps:]])),
-                "obstacle_tail": float(np.nanmean([r["obstacle"] for r in policy.rows[-steps:]])),
+                "density_tail": _mean([r["density"] for r in policy.rows[-steps:]]),
+                "obstacle_tail": _mean([r["obstacle"] for r in policy.rows[-steps:]]),
             }
         )
         if rec.event == "timeout" and plotted < 2:
@@ -108,7 +114,7 @@ def main() -> None:
     for event, rows in sorted(by_event.items()):
 
         def mean(key: str, rows: list[dict[str, float]] = rows) -> float:
-            return float(np.nanmean([r[key] for r in rows]))
+            return _mean([r[key] for r in rows])
 
         print(
             f"| {event} | {len(rows)} | {mean('end'):.2f} | {mean('least'):.2f} | "

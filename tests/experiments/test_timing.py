@@ -99,6 +99,9 @@ def test_other_work_on_the_cpus_slows_the_run():
     assert _estimate(load=0.2).paper_s == pytest.approx(idle.paper_s)
     # one worker on 2 CPUs beside one other process: a CPU of its own
     assert _estimate(workers=1, load=2.0).paper_s == pytest.approx(_estimate(workers=1).paper_s)
+    # the start-up and the report run in one process: a CPU of its own beside one other
+    assert one_busy.fixed_s == pytest.approx(idle.fixed_s)
+    assert _estimate(load=5.0).fixed_s == pytest.approx(idle.fixed_s * 5 / 2)
 
 
 def test_a_cold_numba_cache_adds_the_compile_scaled_by_speed():

@@ -276,7 +276,8 @@ def estimate(
     def wall(rows: Sequence[str]) -> float:
         return sum(times.of(r) for r in rows) * episodes_per_row / rate
 
-    fixed = (times.overhead_s + (times.cold_jit_s if cold else 0.0)) / speed
+    alone = min(1.0, cpus / (busy + 1.0))  # the start-up and the report: mostly one process
+    fixed = (times.overhead_s + (times.cold_jit_s if cold else 0.0)) / (speed * alone)
     return Estimate(wall(paper_rows), wall(extra_rows), fixed, workers, cores, busy, speed)
 
 
