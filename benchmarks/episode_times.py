@@ -13,6 +13,9 @@ which the announced time of any other machine is scaled by. Rows the run did not
 keep their earlier figures. ``--scale F`` divides the measured times by F, for a run that
 other work on the machine slowed F times (the probe, timed by its fastest rounds, measures
 the CPU itself; say why with ``--note``); the notes of the earlier file are replaced.
+``--rows R …`` re-measures only those rows; ``--relative-to ROW`` takes the scale from the
+run's ROW against the file's (for new rows measured on a busy machine of the file's CPU
+model beside a row the file holds; the file keeps its date and machine, a note says so).
 """
 
 from __future__ import annotations
@@ -92,6 +95,15 @@ def updated(
     )
 
 
+def relative_scale(records: list[dict[str, Any]], old: EpisodeTimes, row: str) -> float:
+    """How much slower this run's ``row`` ran than ``old`` stores it: the scale that carries
+    the run's other rows (run beside it, under the same load) to ``old``'s machine."""
+    new = measured(records, digits=9)
+    if row not in new or row not in old.episode_s:
+        raise SystemExit(f"episode_times.py: --relative-to {row}: not in the run and the file")
+    return new[row] / old.episode_s[row]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("run", type=Path, help="the --out folder of a pioneer reproduce run")
@@ -100,6 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--scale", type=float, default=1.0, help="divide the times by this")
     parser.add_argument("--note", action="append", default=[], help="a note to store (repeat)")
+    parser.add_argument("--rows", nargs="+", help="re-measure only these rows")
+    parser.add_argument(
+        "--relative-to",
+        metavar="ROW",
+        help="scale by this run's ROW against the file's (a busy run on the file's CPU model)",
+    )
     args = parser.parse_args(argv)
     if not args.scale > 0:
         parser.error("--scale must be > 0")
@@ -107,16 +125,21 @@ def main(argv: list[str] | None = None) -> int:
     records = read_records(episodes)
     if not records:
         parser.error(f"no episode records in {episodes}")
+    old = load_episode_times(args.output)
     when = datetime.datetime.fromtimestamp(episodes.stat().st_mtime, datetime.UTC).date()
-    times = updated(
-        load_episode_times(args.output),
-        records,
-        when.isoformat(),
-        machine_line(),
-        args.scale,
-        tuple(args.note),
-        probe_seconds(),
-    )
+    scale, machine, notes = args.scale, machine_line(), tuple(args.note)
+    if args.relative_to:
+        scale = relative_scale(records, old, args.relative_to)
+        notes = (
+            *notes,
+            f"{', '.join(args.rows or ['every row'])}: from a run on {when}, "
+            f"scaled by its {args.relative_to} against this file's ({scale:.2f}×)",
+        )
+    if args.rows:
+        records = [r for r in records if r["policy"] in set(args.rows)]
+    times = updated(old, records, when.isoformat(), machine, scale, notes, probe_seconds())
+    if args.relative_to:  # the rows are the file's machine's and date's
+        times = dataclasses.replace(times, measured=old.measured, machine=old.machine)
     write_text_atomic(args.output, json.dumps(times.to_dict(), indent=2) + "\n")
     for row in sorted(measured(records)):
         print(f"{row:24s} {times.of(row):.3f} s")

@@ -204,6 +204,8 @@ def test_the_benchmark_script_updates_the_rows_it_measured(monkeypatch):
     assert new.probe_s == old.probe_s  # no probe given: the old one stays
     probed = bench.updated(old, records, "2030-01-02", "a machine", probe_s=0.0123)
     assert probed.probe_s == 0.0123  # the machine's speed is stored with its times
+    busy = [{"policy": "teacher", "wall_time_s": 3 * old.of("teacher")}]
+    assert bench.relative_scale(busy, old, "teacher") == pytest.approx(3.0)
 
 
 def test_the_jit_cache_is_found_where_numba_keeps_it(tmp_path, monkeypatch):
