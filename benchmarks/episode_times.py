@@ -16,6 +16,9 @@ the CPU itself; say why with ``--note``); the notes of the earlier file are repl
 ``--rows R …`` re-measures only those rows; ``--relative-to ROW`` takes the scale from the
 run's ROW against the file's (for new rows measured on a busy machine of the file's CPU
 model beside a row the file holds; the file keeps its date and machine, a note says so).
+``--round-robin N --rows R …`` times the rows in this process instead, in turn with
+``--references`` on N validation episodes per scenario, by CPU time scaled to the
+references' stored times (for a host too busy for a run's wall times to mean anything).
 """
 
 from __future__ import annotations
@@ -104,6 +107,35 @@ def relative_scale(records: list[dict[str, Any]], old: EpisodeTimes, row: str) -
     return new[row] / old.episode_s[row]
 
 
+def round_robin(
+    old: EpisodeTimes, rows: list[str], references: list[str], n: int
+) -> list[dict[str, Any]]:
+    """Records of ``rows`` timed in-process on a busy machine of the file's CPU model: each
+    row's and each reference row's CPU time per episode, the rows taken in turn on the same
+    ``n`` validation episodes per scenario (one BLAS thread), scaled by the references'
+    stored times over their CPU times here (a 2-worker run's wall time against one process's
+    CPU time)."""
+    import time
+
+    from pioneer.control.registry import build_policy
+    from pioneer.eval.episode import run_episode
+    from pioneer.seeds import validation_seed
+
+    every = [*references, *rows]
+    scenarios = ("hr-rl", "hl-rr")
+    policies = {(sc, r): build_policy(r, sc) for sc in scenarios for r in every}
+    cpu = dict.fromkeys(every, 0.0)
+    for k in range(n):
+        for sc in scenarios:
+            seed = validation_seed("episode-times", sc, k)
+            for r in every:
+                t0 = time.process_time()
+                run_episode(sc, policies[(sc, r)], seed)
+                cpu[r] += (time.process_time() - t0) / (n * len(scenarios))
+    factor = sum(old.of(r) for r in references) / sum(cpu[r] for r in references)
+    return [{"policy": r, "wall_time_s": cpu[r] * factor} for r in rows]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("run", type=Path, help="the --out folder of a pioneer reproduce run")
@@ -118,7 +150,16 @@ def main(argv: list[str] | None = None) -> int:
         metavar="ROW",
         help="scale by this run's ROW against the file's (a busy run on the file's CPU model)",
     )
+    parser.add_argument(
+        "--round-robin",
+        type=int,
+        metavar="N",
+        help="time --rows in-process in turn with --references on N episodes per scenario",
+    )
+    parser.add_argument("--references", nargs="+", default=["teacher", "teacher-no-density"])
     args = parser.parse_args(argv)
+    if args.round_robin and not args.rows:
+        parser.error("--round-robin needs --rows")
     if not args.scale > 0:
         parser.error("--scale must be > 0")
     episodes = args.run / "eval" / EPISODES_FILE
@@ -135,10 +176,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{', '.join(args.rows or ['every row'])}: from a run on {when}, "
             f"scaled by its {args.relative_to} against this file's ({scale:.2f}×)",
         )
+    if args.round_robin:
+        records = round_robin(old, args.rows, args.references, args.round_robin)
+        notes = (
+            *notes,
+            f"{', '.join(args.rows)}: CPU time on {args.round_robin} validation "
+            f"episodes per scenario, taken in turn with {', '.join(args.references)} on a "
+            "busy host of the file's CPU model, scaled by theirs to the file's times",
+        )
     if args.rows:
         records = [r for r in records if r["policy"] in set(args.rows)]
     times = updated(old, records, when.isoformat(), machine, scale, notes, probe_seconds())
-    if args.relative_to:  # the rows are the file's machine's and date's
+    if args.relative_to or args.round_robin:  # the rows are the file's machine's and date's
         times = dataclasses.replace(times, measured=old.measured, machine=old.machine)
     write_text_atomic(args.output, json.dumps(times.to_dict(), indent=2) + "\n")
     for row in sorted(measured(records)):
