@@ -59,7 +59,7 @@ def test_the_stored_times_scale_with_the_probed_speed(speed):
 
 
 def test_the_speed_is_the_probe_ratio(monkeypatch):
-    monkeypatch.setattr(timing, "probe_seconds", lambda: 0.004)  # half the stored machine's
+    monkeypatch.setattr(timing, "probe", lambda: (0.004, 1.0))  # half the stored machine's
     est = estimate(["teacher"], [], 1000, 2, False, cpus=2, load=1.0, times=TIMES)
     assert est.speed == pytest.approx(0.5)
     assert est.paper_s == pytest.approx(0.3 * 1000 / 2 / 0.5)
@@ -102,6 +102,18 @@ def test_other_work_on_the_cpus_slows_the_run():
     # the start-up and the report run in one process: a CPU of its own beside one other
     assert one_busy.fixed_s == pytest.approx(idle.fixed_s)
     assert _estimate(load=5.0).fixed_s == pytest.approx(idle.fixed_s * 5 / 2)
+
+
+def test_a_probe_that_got_part_of_a_cpu_counts_the_others(monkeypatch):
+    """A probe with half a CPU on 2 CPUs: 3 other processes; the 2 workers get 2/5 each."""
+    monkeypatch.setattr(timing, "probe", lambda: (0.002, 0.5))
+    est = estimate(["teacher"], [], 1000, 2, False, cpus=2, times=TIMES)
+    assert est.busy == pytest.approx(3.0)
+    assert est.paper_s == pytest.approx(_estimate().paper_s * 5 / 2)
+    monkeypatch.setattr(timing, "probe", lambda: (0.002, 1.0))  # a whole CPU: the load average
+    monkeypatch.setattr(timing.os, "getloadavg", lambda: (9.0, 9.0, 9.0))
+    est = estimate(["teacher"], [], 1000, 2, False, cpus=2, times=TIMES)
+    assert est.busy == pytest.approx(1.0)  # at most cpus − 1 beside a probe with a whole CPU
 
 
 def test_a_cold_numba_cache_adds_the_compile_scaled_by_speed():

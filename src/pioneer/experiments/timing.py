@@ -37,6 +37,7 @@ __all__ = [
     "jit_cache_warm",
     "load_episode_times",
     "parallel_speed",
+    "probe",
     "probe_seconds",
     "row_times",
 ]
@@ -54,6 +55,7 @@ PROBE_DECISIONS = 1  # rules-only teacher decisions per probe round
 # work (60 rounds under a load of 7 on 2 CPUs: fastest rounds within 3 % of each other).
 PROBE_ROUNDS = 60
 PROBE_BUDGET_S = 0.8  # [s] at most this long (after 10 rounds at least)
+PROBE_FULL_SHARE = 0.95  # a probe with this share of a CPU or more had one to itself
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,13 +180,15 @@ def row_times(records: Sequence[Mapping[str, Any]]) -> dict[str, tuple[int, floa
     return out
 
 
-def probe_seconds(rounds: int = PROBE_ROUNDS) -> float:
+def probe(rounds: int = PROBE_ROUNDS) -> tuple[float, float]:
     """This machine's speed: the time [s] of the fastest of ``rounds`` rounds (fewer if they
     take over :data:`PROBE_BUDGET_S`), each :data:`PROBE_STEPS` world steps of 120 copies
     and :data:`PROBE_DECISIONS` decision of the rules-only teacher, in a fixed HR-RL scene
     (≈ 0.1 s in all on the 2-core reference; before the rounds, the kernels' first call
     loads them, or compiles them on an empty numba cache). The fastest round measures the
-    CPU rather than other work beside it."""
+    CPU rather than other work beside it. Returns that time and the share of a CPU the probe
+    got over all its rounds (its CPU time over their wall time: below 1 when other processes
+    keep the CPUs busy)."""
     import numpy as np
 
     from pioneer.control.teacher import make_teacher
@@ -207,14 +211,20 @@ def probe_seconds(rounds: int = PROBE_ROUNDS) -> float:
 
     one_round()  # loads (or compiles) the kernels
     best = math.inf
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for k in range(rounds):
         t0 = time.perf_counter()
         one_round()
         best = min(best, time.perf_counter() - t0)
         if k >= 10 and t0 - start > PROBE_BUDGET_S:
             break
-    return best
+    share = (time.process_time() - cpu) / max(time.perf_counter() - start, 1e-9)
+    return best, min(share, 1.0)
+
+
+def probe_seconds(rounds: int = PROBE_ROUNDS) -> float:
+    """The probe's time [s] alone (:func:`probe`)."""
+    return probe(rounds)[0]
 
 
 def parallel_speed(workers: int) -> float:
@@ -258,15 +268,23 @@ def estimate(
     """The expected wall time of ``episodes_per_row`` episodes of every row on ``workers``
     workers. ``speed`` (the stored machine's :func:`probe_seconds` ÷ this machine's),
     ``cpus`` and ``load`` (the one-minute load average, this process included) are measured
-    when not given; ``cold``: the kernels are compiled first."""
+    when not given — the other running processes from the share of a CPU the probe got when it
+    got less than all of one (each process an equal share: cpus / share − 1 others), else from
+    the load average, at most cpus − 1 (a lone process gets a whole CPU beside as many);
+    ``cold``: the kernels are compiled first."""
     times = times or episode_times()
+    share_one = 1.0
     if speed is None:
-        speed = times.probe_s / probe_seconds() if times.probe_s else 1.0
+        seconds, share_one = probe()
+        speed = times.probe_s / seconds if times.probe_s else 1.0
     if cpus is None:
         affinity = getattr(os, "sched_getaffinity", None)
         cpus = len(affinity(0)) if affinity is not None else os.cpu_count() or 1
-    if load is None:
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 1.0
+    if load is None and share_one < PROBE_FULL_SHARE:
+        load = cpus / share_one
+    elif load is None:
+        average = os.getloadavg()[0] if hasattr(os, "getloadavg") else 1.0
+        load = min(average, float(cpus))
     cores = max(1, min(workers, cpus))
     busy = max(load - 1.0, 0.0)  # this process is one of the load's
     # the CPUs' share our workers get beside the other work (each runnable process an equal one)
