@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import REPO, SCENARIO, Case, Plan, Result, metric, time_cases
-from pioneer.experiments.reproduce import episode_times
+from pioneer.experiments.timing import episode_times
 
 TRIALS = 60  # teacher episodes per timed run (evaluation seed 0)
 # The paper profile's episodes on 2 workers: user CPU-seconds of its fourth run on the
 # reference machine (docs/performance.md, "Current figures": 2,914 CPU-s): the length of run
 # the serial fraction is projected to; its fixed work (start-up and report) is the
-# ``overhead_s`` of the shipped episode times (pioneer.experiments.reproduce.episode_times).
+# ``overhead_s`` of the shipped episode times (pioneer.experiments.timing.episode_times).
 PAPER_EPISODE_CPU_S = 2900.0
 PROJECTED_WORKERS = (2, 4, 8, 16, 32)
 

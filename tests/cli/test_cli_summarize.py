@@ -128,7 +128,7 @@ def test_the_summary_line_shows_no_time_without_a_success(run, capsys):
     assert main(["summarize", str(run)]) == 0
     line = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("static/goal:")]
     assert len(line) == 1
-    assert line[0].startswith("static/goal: SR 0.0%  TT, PL n/a (no successes)  (")
+    assert line[0].startswith("static/goal: SR 0.0%  TT, PL – (no successes)  (")
 
 
 def test_the_summary_line_shows_time_and_length_of_the_successes(run, capsys):

@@ -202,3 +202,19 @@ def test_the_teacher_keeps_its_soft_margins_and_teacher_paper_none():
     assert SoftMargins() != SoftMargins(human=0.0, wall=0.0)
     bare = registry.build_policy("teacher-paper", "hr-rl")
     assert bare.config.margins == SoftMargins(human=0.0, wall=0.0)
+    assert bare.config.fallback == "stop"  # the paper's teacher: no evade fallback
+    assert registry.build_policy("teacher", "hr-rl").config.fallback == "evade"
+    evade = registry.build_policy("teacher-paper-evade", "hr-rl").config
+    assert (evade.margins, evade.fallback) == (SoftMargins(human=0.0, wall=0.0), "evade")
+
+
+@pytest.mark.parametrize("term", ["density", "goal", "obstacle"])
+def test_the_papers_ablations_are_the_papers_teacher_less_one_term(term):
+    from pioneer.control.teacher import SoftMargins
+
+    cfg = registry.build_policy(f"teacher-paper-no-{term}", "hr-rl").config
+    assert (cfg.margins, cfg.fallback) == (SoftMargins(human=0.0, wall=0.0), "stop")
+    ours = registry.build_policy(f"teacher-no-{term}", "hr-rl").config
+    assert (ours.margins, ours.fallback) == (SoftMargins(), "evade")
+    used = {t: getattr(cfg.weights, f"use_{t}") for t in ("density", "goal", "obstacle")}
+    assert used == {t: t != term for t in used}

@@ -143,25 +143,31 @@ def test_mean_ci_ignores_missing_and_infinite_values():
 
 
 def test_paper_numbers_are_the_papers():
-    assert PAPER[("I", "hr-rl", "teacher")] == (99.4, 12.24, 3.74)
-    assert PAPER[("I", "hl-rr", "teacher")] == (99.6, 12.94, 3.88)
-    assert PAPER[("II", "hr-rl", "teacher-no-density")] == (83.0, 13.61, 4.55)
+    assert PAPER[("I", "hr-rl", "teacher-paper")] == (99.4, 12.24, 3.74)
+    assert PAPER[("I", "hl-rr", "teacher-paper")] == (99.6, 12.94, 3.88)
+    assert PAPER[("II", "hr-rl", "teacher-paper-no-density")] == (83.0, 13.61, 4.55)
+    assert ("I", "hr-rl", "teacher") not in PAPER  # ours deviates: no paper value beside it
     assert PAPER[("III", "hl-rr", "student-mdn")] == (100.0, 14.16, 4.70)
 
 
 def _table_inputs():
-    recs = RECORDS + [_rec(s, 0, "success", 8.0, 3.0, pol="goal") for s in range(2)]
+    recs = [{**r, "policy": "teacher-paper"} for r in RECORDS] + [
+        _rec(s, 0, "success", 8.0, 3.0, pol="goal") for s in range(2)
+    ]
     summary = summarize(recs)
-    rows = table_rows("I", summary, ["hr-rl", "hl-rr"], ["teacher", "goal", "cvar-bf"])
+    rows = table_rows("I", summary, ["hr-rl", "hl-rr"], ["teacher-paper", "goal", "cvar-bf"])
     return summary, rows
 
 
 def test_table_rows_keep_the_requested_order_and_skip_missing_entries():
     summary, rows = _table_inputs()
-    assert [(r["scenario"], r["method"]) for r in rows] == [("hr-rl", "teacher"), ("hr-rl", "goal")]
+    assert [(r["scenario"], r["method"]) for r in rows] == [
+        ("hr-rl", "teacher-paper"),
+        ("hr-rl", "goal"),
+    ]
     assert rows[0]["paper"] == (99.4, 12.24, 3.74)
     assert rows[1]["paper"] is None
-    assert rows[0]["sr"] == summary["hr-rl/teacher"]["success_rate"]
+    assert rows[0]["sr"] == summary["hr-rl/teacher-paper"]["success_rate"]
     assert rows[0]["episodes"] == 8
 
 
@@ -172,8 +178,8 @@ def test_markdown_table_shows_the_paper_numbers_beside_ours():
     assert lines[0] == "**Table I**"
     assert lines[4].startswith("| Scenario | Method | SR")
     assert len(lines) == 6 + len(rows)
-    teacher = next(x for x in lines if "| teacher |" in x)
-    s = summary["hr-rl/teacher"]
+    teacher = next(x for x in lines if "| teacher-paper |" in x)
+    s = summary["hr-rl/teacher-paper"]
     assert "| HR-RL |" in teacher
     assert "99.4 / 12.24 / 3.74" in teacher
     # 3 seeds: t over seeds; 33.3 ± 71.7 would leave 0–100 %, so it is printed clipped
@@ -196,8 +202,13 @@ def test_csv_table_has_our_values_and_the_papers():
     parsed = list(csv.DictReader(io.StringIO(csv_table(rows, "I"))))
     assert len(parsed) == 2
     t, g = parsed
-    s = summary["hr-rl/teacher"]
-    assert (t["table"], t["scenario"], t["method"], t["episodes"]) == ("I", "hr-rl", "teacher", "8")
+    s = summary["hr-rl/teacher-paper"]
+    assert (t["table"], t["scenario"], t["method"], t["episodes"]) == (
+        "I",
+        "hr-rl",
+        "teacher-paper",
+        "8",
+    )
     assert float(t["sr"]) == s["success_rate"]["mean"]
     assert float(t["sr_ci95"]) == s["success_rate"]["ci95"]
     assert float(t["tt_s"]) == s["time_mean_s"]["mean"]

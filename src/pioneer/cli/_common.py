@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import math
 import os
 import sys
 import typing
@@ -41,6 +42,7 @@ __all__ = [
     "default",
     "flag_name",
     "metavar",
+    "number",
     "one_of",
     "optional",
     "policy_spec",
@@ -54,6 +56,14 @@ class Command(Protocol):
     def run(self) -> int:
         """Do the work; a :class:`~pioneer.errors.PioneerError` becomes one line, exit 2."""
         ...
+
+
+def number(value: float | None, spec: str, unit: str = "") -> str:
+    """``value`` formatted by ``spec`` (with `` unit`` after it), or "–" where there is none
+    (``None``, NaN, ±∞: a mean over no episode), as the tables print it; never ``nan``."""
+    if value is None or not math.isfinite(value):
+        return "–"
+    return f"{value:{spec}}" + (f" {unit}" if unit else "")
 
 
 def one_of(values: Iterable[str]) -> Any:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
@@ -19,6 +18,7 @@ from pioneer.cli._common import (
     Workers,
     default,
     metavar,
+    number,
     one_of,
     optional,
     policy_spec,
@@ -271,16 +271,13 @@ class Eval:
 
 def _print_rows(summary: Mapping[str, Mapping[str, Any]]) -> None:
     """One line per row: SR, TT, PL and the episodes. TT and PL are means over successes; a
-    row without any says so once: ``TT, PL n/a (no successes)``."""
-
-    def value(x: float | None, unit: str) -> str:
-        return f"{x:.2f} {unit}" if x is not None and math.isfinite(x) else "n/a"
-
+    row without any says so once: ``TT, PL – (no successes)``; no value prints ``nan``."""
     for key, s in summary.items():
-        tt = value(s["time_mean_s"]["mean"], "s")
-        pl = value(s["path_length_mean_m"]["mean"], "m")
-        means = "TT, PL n/a (no successes)" if tt == pl == "n/a" else f"TT {tt}  PL {pl}"
-        print(f"{key}: SR {s['success_rate']['mean']:.1f}%  {means}  ({s['episodes']} episodes)")
+        tt = number(s["time_mean_s"]["mean"], ".2f", "s")
+        pl = number(s["path_length_mean_m"]["mean"], ".2f", "m")
+        means = "TT, PL – (no successes)" if tt == pl == "–" else f"TT {tt}  PL {pl}"
+        sr = number(s["success_rate"]["mean"], ".1f")
+        print(f"{key}: SR {sr}%  {means}  ({s['episodes']} episodes)")
 
 
 @dataclasses.dataclass(frozen=True)

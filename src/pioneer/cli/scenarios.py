@@ -19,6 +19,7 @@ from pioneer.cli._common import (
     config_flags,
     default,
     metavar,
+    number,
     optional,
     require_some,
 )
@@ -117,7 +118,7 @@ class Calibrate:
             for key in (*BANDS, "teacher_risky_frame_share_gap", "risky_at_start_share"):
                 lo_hi = BANDS.get(key)
                 mark = "" if lo_hi is None else (" ok" if st["within_band"][key] else " OUT")
-                cells.append(f"{key} {st[key]:.3g}{mark}")
+                cells.append(f"{key} {number(st[key], '.3g')}{mark}")
             print(f"{name}: " + "; ".join(cells))
         print(f"wrote {Path(self.out) / 'calibration.json'} ({res['elapsed_s']:.0f} s)")
         return 0

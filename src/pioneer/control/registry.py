@@ -122,29 +122,76 @@ _TEACHER_PARTS = {"check": f"{_OWN}:check_teacher", "files": f"{_OWN}:teacher_fi
 _STUDENT_PARTS = {"check": f"{_PARTS}:student", "files": f"{_OWN}:student_files"}
 _CROWDNAV_PARTS = {"check": f"{_PARTS}:crowdnav", "files": f"{_OWN}:crowdnav_files"}
 _SB3_PARTS = {"check": f"{_PARTS}:sb3", "files": f"{_OWN}:sb3_files"}
+# The paper's teacher (§IV-A.2): no soft margins, and a stop when no command is feasible.
+_PAPER_TEACHER: dict[str, Any] = {
+    "human_margin": 0.0,
+    "wall_margin": 0.0,
+    "fallback": "stop",
+    "patience": 0.0,
+}
 _BUILTINS = (
-    _builtin("teacher", _TEACHER, "lookahead teacher (paper §IV-A.2)", **_TEACHER_PARTS),
+    _builtin(
+        "teacher",
+        _TEACHER,
+        "our lookahead teacher: the paper's with soft margins and the evade fallback",
+        **_TEACHER_PARTS,
+    ),
     _builtin(
         "teacher-paper",
         _TEACHER,
-        "lookahead teacher without the soft margins (the paper's, §IV-A.2)",
+        "the paper's lookahead teacher (§IV-A.2): no soft margins, stops when no command is "
+        "feasible",
+        **_TEACHER_PARTS,
+        **_PAPER_TEACHER,
+        name="teacher-paper",
+    ),
+    _builtin(
+        "teacher-paper-no-density",
+        _TEACHER,
+        "the paper's teacher without R_den (Table II)",
+        **_PAPER_TEACHER,
+        density=False,
+        name="teacher-paper-no-density",
+    ),
+    _builtin(
+        "teacher-paper-no-goal",
+        _TEACHER,
+        "the paper's teacher without R_goal (Table II)",
+        **_TEACHER_PARTS,
+        **_PAPER_TEACHER,
+        goal=False,
+        name="teacher-paper-no-goal",
+    ),
+    _builtin(
+        "teacher-paper-no-obstacle",
+        _TEACHER,
+        "the paper's teacher without R_obs (Table II)",
+        **_TEACHER_PARTS,
+        **_PAPER_TEACHER,
+        obstacle=False,
+        name="teacher-paper-no-obstacle",
+    ),
+    _builtin(
+        "teacher-paper-evade",
+        _TEACHER,
+        "the paper's teacher with our evade fallback (no soft margins; calibrate's driver)",
         **_TEACHER_PARTS,
         human_margin=0.0,
         wall_margin=0.0,
         patience=0.0,
-        name="teacher-paper",
+        name="teacher-paper-evade",
     ),
     _builtin(
         "teacher-no-density",
         _TEACHER,
-        "teacher without R_den (Table II)",
+        "our teacher (soft margins, evade fallback) without R_den (Table II)",
         density=False,
         name="teacher-no-density",
     ),
     _builtin(
         "teacher-no-goal",
         _TEACHER,
-        "teacher without R_goal (Table II)",
+        "our teacher (soft margins, evade fallback) without R_goal (Table II)",
         **_TEACHER_PARTS,
         goal=False,
         name="teacher-no-goal",
@@ -152,7 +199,7 @@ _BUILTINS = (
     _builtin(
         "teacher-no-obstacle",
         _TEACHER,
-        "teacher without R_obs (Table II)",
+        "our teacher (soft margins, evade fallback) without R_obs (Table II)",
         **_TEACHER_PARTS,
         obstacle=False,
         name="teacher-no-obstacle",

@@ -67,7 +67,7 @@ def _paper(scenario: str) -> dict[str, float]:
     from pioneer.eval.tables import PAPER as TABLES
     from pioneer.eval.uncertainty import PAPER_TABLE_IV
 
-    _, tt, pl = TABLES[("I", scenario, "teacher")]
+    _, tt, pl = TABLES[("I", scenario, "teacher-paper")]
     iv = PAPER_TABLE_IV[scenario]
     share = iv["frames_risky"] / (iv["frames_risky"] + iv["frames_safe"])
     return {"teacher_path_length_m": pl, "teacher_time_s": tt, "risky_share": share}
@@ -106,7 +106,7 @@ def _humans_alone(world: Any, state0: Any, time_limit: float) -> tuple[bool, lis
 
 def episode_statistics(task: tuple[str, int, str]) -> dict[str, Any]:
     """The three runs of one validation episode (a picklable task for the worker pool):
-    ``(scenario, seed, driver)``, the driver a policy name (``teacher-paper`` by default)."""
+    ``(scenario, seed, driver)``, the driver a policy name (``teacher-paper-evade`` by default)."""
     from pioneer.control.registry import build_policy
     from pioneer.demos.scripted import CarelessDriver
     from pioneer.eval.episode import run_episode
@@ -206,12 +206,13 @@ def calibrate(
     out_dir: str | Path | None = None,
     workers: int | None = None,
     progress: bool = True,
-    driver: str = "teacher-paper",
+    driver: str = "teacher-paper-evade",
 ) -> dict[str, Any]:
     """Measure the world statistics of ``scenarios`` on ``episodes`` validation seeds each;
     write ``out_dir/calibration.json`` (and per-episode rows) if given. ``driver`` is the
     policy whose statistics are the ``teacher_*`` keys: by default the paper's teacher (no
-    soft margins), whose TT and PL the bands compare with the paper's; e.g.
+    soft margins) with our evade fallback, the driver the world was measured with, whose TT
+    and PL the bands compare with the paper's; e.g.
     ``teacher-no-density``."""
     from pioneer.control.registry import check_parts, policy_factory
     from pioneer.eval.harness import PolicySpec, made_by

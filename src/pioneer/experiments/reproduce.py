@@ -16,9 +16,7 @@ Steps (each output is written atomically; the evaluation resumes if interrupted)
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
-import math
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -32,6 +30,7 @@ from pioneer.eval.episode import RISKY_DISTANCE_M
 from pioneer.eval.harness import PolicySpec, episode_seed, evaluate
 from pioneer.eval.metrics import summarize
 from pioneer.eval.report import write_summary
+from pioneer.experiments.timing import announcement, estimate, jit_cache_warm, row_times
 from pioneer.io import inside, output_dir_kind, run_lock, to_json, write_text_atomic
 from pioneer.parallel import worker_count
 
@@ -39,14 +38,8 @@ __all__ = [
     "PAPER_ROWS",
     "PROFILES",
     "UNCERTAINTY_KEY",
-    "EpisodeTimes",
     "Profile",
-    "episode_times",
-    "expected_seconds",
-    "jit_cache_warm",
-    "load_episode_times",
     "reproduce",
-    "row_times",
 ]
 
 
@@ -64,146 +57,27 @@ PROFILES = {
     "paper": Profile(seeds=5, trials=100),
 }
 SCENARIOS = ("hr-rl", "hl-rr")
+# paper Tables I–II: the paper's teacher (no soft margins, the stop fallback) and its ablations,
+# the rows compared with the paper; beside them ours (soft margins in tiers, the evade
+# fallback: docs/teacher.md), the teacher the students imitate, and its ablations
+PAPER_TEACHERS = (
+    "teacher-paper",
+    "teacher-paper-no-density",
+    "teacher-paper-no-goal",
+    "teacher-paper-no-obstacle",
+)
 TEACHERS = ("teacher", "teacher-no-density", "teacher-no-goal", "teacher-no-obstacle")
 STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger students
 PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
-# beyond the paper, in Table I: the teacher without its soft margins (the paper's), classic
-# references and Stable-Baselines3's PPO with its defaults on the environment's own reward
-CLASSIC = ("teacher-paper", "dwa", "sfm", "goal", "sb3-ppo")
-PAPER_ROWS = (*TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
+# beyond the paper, in Table I: classic references and Stable-Baselines3's PPO with its
+# defaults on the environment's own reward
+CLASSIC = ("dwa", "sfm", "goal", "sb3-ppo")
+PAPER_ROWS = (*PAPER_TEACHERS, *BASELINES, *STUDENTS)  # the rows of the paper's Tables I–IV
 SEED_ROW = "{name}-s{seed}"  # the row of a student's other DAgger seeds (seed 0: its name)
 # uncertainty.json: the key of the safe/risky split at the paper's threshold (Table IV)
 UNCERTAINTY_KEY = f"threshold_{RISKY_DISTANCE_M:g}m"
-
-EPISODE_TIMES_FORMAT = "pioneer.episode-times/1"
-
-
-@dataclasses.dataclass(frozen=True)
-class EpisodeTimes:
-    """What a run costs on the machine it was measured on (``machine``; docs/performance.md),
-    stored in ``src/pioneer/data/episode_times.json`` by ``benchmarks/episode_times.py`` from
-    a finished paper-profile run. Only for the expected time that ``reproduce`` announces
-    before it starts."""
-
-    episode_s: Mapping[str, float]  # [s] mean wall time of one episode per policy, one worker
-    default_episode_s: float  # [s] a policy not listed
-    overhead_s: float  # [s] starting the workers, writing the tables, figures and Table IV
-    cold_jit_s: float  # [s] numba compiling the kernels in every worker (empty cache)
-    measured: str  # the date of the measurement (YYYY-MM-DD)
-    machine: str  # what it was measured on
-    source: str = ""  # how it was measured
-    notes: tuple[str, ...] = ()
-
-    def of(self, row: str) -> float:
-        """The mean time [s] of one episode of the policy row ``row`` (a student's other
-        DAgger seeds cost what its seed 0 costs)."""
-        name = row.rsplit("-s", 1)[0] if row.rsplit("-s", 1)[-1].isdigit() else row
-        return float(self.episode_s.get(row, self.episode_s.get(name, self.default_episode_s)))
-
-    def machine_short(self) -> str:
-        """The CPU the times were measured on, without its feature list (``"AMD EPYC
-        (znver4)"`` of ``"AMD EPYC (znver4: sse4.2+…), 2 CPUs, Linux…"``, the form
-        ``benchmarks/episode_times.py``'s ``machine_line`` writes; any other text up to its
-        first comma)."""
-        head = self.machine.split(",")[0].strip()
-        if "(" in head and ":" in head:
-            head = head.split(":")[0] + ")"
-        return head or "unknown"
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON form (the keys :func:`load_episode_times` reads)."""
-        return {
-            "format": EPISODE_TIMES_FORMAT,
-            "measured": self.measured,
-            "machine": self.machine,
-            "source": self.source,
-            "notes": list(self.notes),
-            "unit": "s",
-            "episode_s": dict(self.episode_s),
-            "default_episode_s": self.default_episode_s,
-            "overhead_s": self.overhead_s,
-            "cold_jit_s": self.cold_jit_s,
-        }
-
-
-def load_episode_times(path: str | Path) -> EpisodeTimes:
-    """Read an episode-times file; a missing, foreign or malformed one raises one
-    :class:`DataError` naming the file and the field."""
-    p = Path(path)
-    fix = "regenerate it with benchmarks/episode_times.py"
-    try:
-        raw = json.loads(p.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise DataError(
-            expect("episode times", "a readable JSON file", f"{p}: {exc}", fix)
-        ) from exc
-    if not isinstance(raw, dict) or raw.get("format") != EPISODE_TIMES_FORMAT:
-        got = raw.get("format") if isinstance(raw, dict) else type(raw).__name__
-        raise DataError(expect(f"{p}: format", EPISODE_TIMES_FORMAT, got, fix))
-
-    def seconds(key: str, value: Any) -> float:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        if not ok or not math.isfinite(value) or value < 0:
-            raise DataError(expect(f"{p}: {key}", "a finite time >= 0 [s]", value, fix))
-        return float(value)
-
-    table = raw.get("episode_s")
-    if not isinstance(table, dict) or not table:
-        raise DataError(expect(f"{p}: episode_s", "a mapping policy -> seconds", table, fix))
-    return EpisodeTimes(
-        episode_s={str(k): seconds(f"episode_s.{k}", v) for k, v in table.items()},
-        default_episode_s=seconds("default_episode_s", raw.get("default_episode_s")),
-        overhead_s=seconds("overhead_s", raw.get("overhead_s")),
-        cold_jit_s=seconds("cold_jit_s", raw.get("cold_jit_s")),
-        measured=str(raw.get("measured", "")),
-        machine=str(raw.get("machine", "")),
-        source=str(raw.get("source", "")),
-        notes=tuple(str(n) for n in raw.get("notes", ())),
-    )
-
-
-@functools.cache
-def episode_times() -> EpisodeTimes:
-    """The shipped measurement (``src/pioneer/data/episode_times.json``), read once."""
-    from pioneer.data import EPISODE_TIMES
-
-    return load_episode_times(EPISODE_TIMES)
-
-
-def expected_seconds(rows: Sequence[str], episodes_per_row: int, workers: int) -> float:
-    """The expected wall time [s] of ``episodes_per_row`` episodes of each policy row on
-    ``workers`` cores like those :func:`episode_times` was measured on."""
-    times = episode_times()
-    cpu = sum(times.of(row) for row in rows) * episodes_per_row
-    return cpu / max(workers, 1)
-
-
-def jit_cache_warm() -> bool:
-    """Whether numba's on-disk cache already holds the simulator's step kernel and the
-    teacher's rollout kernel (else the first episode of every worker compiles them:
-    ``episode_times().cold_jit_s``)."""
-    from numba.core import config
-
-    import pioneer.sim.kernel as kernel
-
-    patterns = ("kernel.step_kernel-*.nbi", "lanes.trajectory_kernel_lanes-*.nbi")
-    cache_dir = str(getattr(config, "CACHE_DIR", "") or "")  # NUMBA_CACHE_DIR, read by numba
-    if cache_dir:
-        root = Path(cache_dir)
-        return root.is_dir() and all(any(root.rglob(p)) for p in patterns)
-    here = Path(kernel.__file__).parent / "__pycache__"
-    return all(any(here.glob(p)) for p in patterns)
-
-
-def row_times(records: Sequence[dict[str, Any]]) -> dict[str, tuple[int, float]]:
-    """Episodes and summed episode run time [s] of every policy row, in first-seen order."""
-    out: dict[str, tuple[int, float]] = {}
-    for r in records:
-        n, sec = out.get(r["policy"], (0, 0.0))
-        out[r["policy"]] = (n + 1, sec + float(r.get("wall_time_s", 0.0)))
-    return out
 
 
 def _time_table(records: Sequence[dict[str, Any]], workers: int) -> str:
@@ -278,7 +152,7 @@ def _reproduce(
     t0 = time.perf_counter()
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
-    policies = [PolicySpec.make(name, reward=reward_tpl) for name in TEACHERS]
+    policies = [PolicySpec.make(name, reward=reward_tpl) for name in (*PAPER_TEACHERS, *TEACHERS)]
     extra = [PolicySpec.make(name) for name in (*BASELINES, *CLASSIC)] + list(extra_policies)
     students = student_specs()
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
@@ -305,9 +179,19 @@ def _reproduce(
                 "I",
                 "Table I — navigation performance",
                 SCENARIOS,
-                ["teacher", *[p.row for p in extra]],
+                [
+                    "teacher-paper",
+                    *BASELINES,
+                    "teacher",
+                    *[p.row for p in extra if p.row not in BASELINES],
+                ],
             ),
-            ("II", "Table II — ablation of the reward terms", SCENARIOS, list(TEACHERS)),
+            (
+                "II",
+                "Table II — ablation of the reward terms",
+                SCENARIOS,
+                [*PAPER_TEACHERS, *TEACHERS],
+            ),
             (
                 "III",
                 "Table III — distilled students (shipped DAgger checkpoints) and the "
@@ -352,37 +236,22 @@ def _announce(
     fresh: bool = False,
 ) -> None:
     """One line before the work: how many episodes, how many are done (none when ``fresh``:
-    starting over), the expected time."""
+    starting over), the expected time on this machine (:mod:`pioneer.experiments.timing`)."""
     import sys
 
     from pioneer.eval.harness import EPISODES_FILE, read_records
 
-    n_workers = worker_count(workers)
     per_row = len(SCENARIOS) * prof.seeds * prof.trials
     done = 0 if fresh else len(read_records(out / "eval" / EPISODES_FILE))
     total = per_row * len(rows)
-    left = 1.0 - done / total
-    paper = expected_seconds([r for r in rows if r in PAPER_ROWS], per_row, n_workers) * left
-    extra = expected_seconds([r for r in rows if r not in PAPER_ROWS], per_row, n_workers) * left
-    cold = not jit_cache_warm()
-    times = episode_times()
-    fixed = times.overhead_s + (times.cold_jit_s if cold else 0.0)
-    total_s = paper + extra + fixed
-    digits = 1 if total_s < 600 else 0  # short runs in tenths of a minute
-
-    def minutes(sec: float) -> str:
-        return f"{sec / 60:.{digits}f}"
-
-    print(
-        f"pioneer reproduce --profile {profile}: {total:,} episodes ({done:,} done), expected "
-        f"≈ {minutes(total_s)} min (the paper's rows {minutes(paper)}, the extra rows "
-        f"{minutes(extra)}, start-up{', compiling the kernels' if cold else ''} and report "
-        f"{minutes(fixed)}) with {n_workers} worker(s) on a 2-core machine like the one these "
-        f"times were measured on ({times.machine_short()}, {times.measured}; a slower CPU "
-        f"takes longer: docs/performance.md)",
-        file=sys.stderr,
-        flush=True,
+    est = estimate(
+        [r for r in rows if r in PAPER_ROWS],
+        [r for r in rows if r not in PAPER_ROWS],
+        per_row * (1.0 - done / total),
+        worker_count(workers),
+        cold=not jit_cache_warm(),
     )
+    print(announcement(profile, total, done, est), file=sys.stderr, flush=True)
 
 
 def _table_iv(out: Path, records: Sequence[dict[str, Any]]) -> str:
@@ -634,9 +503,11 @@ def _index(
         f"{profile}{'' if seed_set == 'evaluation' else ' --seed-set ' + seed_set}`.",
         "",
         "The CrowdNav++ and SB3 PPO rows (Table I) are the shipped weights; how they were "
-        "trained: src/pioneer/data/baselines/README.md. The teacher keeps "
-        "soft margins to people and walls (docs/teacher.md); `teacher-paper` is the "
-        "teacher without them.",
+        "trained: src/pioneer/data/baselines/README.md. Tables I–II: `teacher-paper` and "
+        "`teacher-paper-no-*` are the paper's teacher and its ablations (no soft margins; "
+        "it stops when no command is feasible), the rows compared with the paper; `teacher` "
+        "and `teacher-no-*` are ours, which the students imitate: soft margins to people "
+        "and walls and the evade fallback (docs/teacher.md).",
         "",
         "Per-episode records: [eval/episodes.jsonl](eval/episodes.jsonl); all metrics with "
         "95% confidence intervals: [summary.json](summary.json); tables as CSV: "
