@@ -115,6 +115,7 @@ def test_the_mixture_is_half_own_half_mirrored():
     """p_sym(u | x) = ½ p(u | x) + ½ p(m(u) | M x), by the log-likelihood of both networks."""
     rng = np.random.default_rng(3)
     sym = symmetric_student("mdn", StudentInputs(), seed=4)
+    assert sym.config.symmetric_loss == "each_half"  # the default; the forward is the same
     plain = build_student(StudentConfig(), seed=4)
     plain.load_state_dict(sym.state_dict())
     x = torch.from_numpy(observations(rng, 64))
@@ -177,3 +178,22 @@ def test_a_symmetric_student_trains_saves_and_exports(kind, tmp_path: Path):
     (onnx_am,) = session.run(["action"], {"obs": x_m})
     np.testing.assert_allclose(onnx_a, a, atol=1e-4)
     np.testing.assert_allclose(onnx_am, a * FLIP, atol=1e-4)
+
+
+def test_each_half_trains_on_the_frame_and_its_mirror_image():
+    """``symmetric_loss="each_half"``: −½ (log p(u | x) + log p(m(u) | M x)) of the network's
+    own (unsymmetrised) mixture, so both halves fit both sides; the forward stays symmetric."""
+    rng = np.random.default_rng(7)
+    sym = build_student(StudentConfig(symmetric=True, symmetric_loss="each_half"), seed=2)
+    plain = build_student(StudentConfig(), seed=2)
+    plain.load_state_dict(sym.state_dict())
+    x = torch.from_numpy(observations(rng, 32))
+    u = torch.from_numpy(np.stack([rng.uniform(0, 0.8, 32), rng.uniform(-1, 1, 32)], 1)).float()
+    with torch.no_grad():
+        flip = torch.tensor([1.0, -1.0])
+        want = -0.5 * (plain.log_prob(x, u) + plain.log_prob(sym.mirror(x), u * flip)).mean()
+        assert float(sym.loss(x, u)) == pytest.approx(float(want), rel=1e-6)
+        a = sym.deterministic_action(x).numpy()
+        np.testing.assert_allclose(
+            sym.deterministic_action(sym.mirror(x)).numpy(), a * FLIP, atol=TOL
+        )

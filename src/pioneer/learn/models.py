@@ -114,6 +114,10 @@ class StudentConfig(Config):
     # mirrored x → −x and m(v, ω) = (v, −ω), so its command for a mirrored observation is the
     # mirrored command (docs/student.md, "Symmetry built in")
     symmetric: bool = False
+    # how a symmetric MDN trains: each half's own likelihood on the frame and on its mirror
+    # image ("each_half": both halves fit both sides), or the symmetric mixture's ("mixture":
+    # one half may explain a frame alone, and the other's mode then misleads; docs/student.md)
+    symmetric_loss: Literal["each_half", "mixture"] = "each_half"
 
     @property
     def inputs(self) -> StudentInputs:
@@ -309,6 +313,11 @@ class MDN(Student):
     def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """The training loss: :meth:`nll`, or with ``nll_beta`` = β > 0 the β-NLL."""
         beta = float(self.config.nll_beta)
+        if self.config.symmetric and self.config.symmetric_loss == "each_half":
+            flip = torch.as_tensor(MIRROR_ACTION)
+            own = _mixture_log_prob(*self._mixture(obs), actions.unsqueeze(1))
+            other = _mixture_log_prob(*self._mixture(self.mirror(obs)), (actions * flip)[:, None])
+            return -0.5 * (own + other).mean()
         if beta == 0.0:
             return self.nll(obs, actions)
         logits, mu, sigma = self(obs)
