@@ -60,8 +60,8 @@ def _teacher(
             assume_radius=assume.human_radius,
             assume_a_robot=assume.a_robot,
             assume_start_now=assume.start_now,
-            patience=patience.after,
         )
+        # the whole Patience (its progress step too), which make_teacher takes only as `after`
         _CACHE[key].config = dataclasses.replace(_CACHE[key].config, patience=patience)
     return _CACHE[key]
 
