@@ -7,7 +7,8 @@
   run ships (purpose ``"dagger-select"``); values in
   [2³², 2³³), so never an evaluation episode.
 - **training**: demonstrations (``training_seed``: values in [2³³, 2³³ + 2³²)) and DAgger
-  rollouts (``dagger_seed``: values in [2³³ + 2³², 2³⁴)).
+  rollouts (``dagger_seed``) and the students' fine-tuning episodes (``finetune_seed``), both
+  with values in [2³³ + 2³², 2³⁴).
 
 Each seed seeds one episode (``env.reset(seed=...)``) and the policy's own generator.
 
@@ -33,6 +34,7 @@ __all__ = [
     "dagger_seed",
     "episode_seed",
     "evaluation_seed",
+    "finetune_seed",
     "training_seed",
     "validation_seed",
 ]
@@ -81,3 +83,10 @@ def dagger_seed(scenario: str, seed: int, rnd: int, episode: int) -> int:
     a training seed in [2³³ + 2³², 2³⁴), so never an evaluation, validation or demonstration
     episode."""
     return DAGGER_BASE + _hash32("dagger", scenario, seed, rnd, episode)
+
+
+def finetune_seed(seed: int, k: int, purpose: str = "episode") -> int:
+    """The ``k``-th episode of a students' fine-tuning run seeded ``seed`` (``purpose``
+    ``"lidar"``: the LiDAR noise of the group started there): a training seed in DAgger's half
+    of the range, [2³³ + 2³², 2³⁴), hashed apart from DAgger's own."""
+    return DAGGER_BASE + _hash32("finetune", purpose, seed, k)

@@ -76,6 +76,9 @@ _TREE = _Group(
         "distill": _Leaf(
             "learning:Distill", "DAgger: distil the teacher into a LiDAR-only student"
         ),
+        "finetune": _Leaf(
+            "learning:Finetune", "fine-tune a DAgger student with PPO (resumes an existing --out)"
+        ),
         "export": _Leaf("deploy:Export", "student checkpoint → ONNX, with a parity check"),
         "replay": _Leaf("deploy:Replay", "ROS bag LaserScans → student commands CSV (no ROS)"),
         "train": _Group(

@@ -39,6 +39,7 @@ from pioneer.io import to_json
 from pioneer.laser import UNSEEN_RULES
 from pioneer.laser import UnseenRule as LaserUnseenRule
 from pioneer.learn.dagger import DaggerConfig, run_dagger
+from pioneer.learn.finetune import FinetuneConfig, finetune_student
 from pioneer.learn.models import MDN_ONLY, StudentConfig
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
@@ -47,7 +48,7 @@ if TYPE_CHECKING:
 else:
     UnseenRule = one_of(UNSEEN_RULES)
 
-__all__ = ["Distill", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
+__all__ = ["Distill", "Finetune", "StudyBlindSector", "TrainCrowdNav", "TrainSb3"]
 
 config_flags(DaggerConfig)
 config_flags(SoftMargins, human="human_margin", wall="wall_margin", tiers="margin_tiers")
@@ -60,6 +61,7 @@ config_flags(
 config_flags(Patience, after="patience", progress="patience_progress")
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")
+config_flags(FinetuneConfig, total_steps="steps", reward=None)
 config_flags(WarmStartConfig, expert="bc_expert")
 
 
@@ -114,6 +116,42 @@ class Distill:
                         f"drop {flag}",
                     )
                 )
+
+
+@dataclasses.dataclass(frozen=True)
+class Finetune:
+    """Fine-tune a DAgger student with PPO over scenarios or a layout distribution (resumes an
+    existing --out; docs/student.md)."""
+
+    out: OutDir
+    """output folder (student, checkpoint, curve)"""
+    student: Annotated[str, metavar("FILE"), Input("file")]
+    """the DAgger student to start from (.safetensors)"""
+    scenario: Annotated[tuple[str, ...], metavar("NAME")] = ("general-*",)
+    """scenarios or patterns (general-*: the layouts of `pioneer --scenarios FILE`)"""
+    finetune: tyro.conf.OmitArgPrefixes[FinetuneConfig] = FinetuneConfig()
+    """fine-tuning settings"""
+    threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")
+    """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.2× faster)"""
+    resume: Flag = False
+    """require a checkpoint in --out (default: resume if there is one)"""
+
+    def run(self) -> int:
+        """Fine-tune (or resume); print the outputs and the final statistics (JSON lines)."""
+        require_some("--scenario", self.scenario)
+        summary = finetune_student(
+            self.student,
+            self.scenario,
+            self.out,
+            self.finetune,
+            resume=True if self.resume else None,
+            command=command_line(),
+            torch_threads=self.threads,
+        )
+        student = f"{self.out}/student.safetensors"
+        print(to_json({"student": student, "updates": summary["updates"]}))
+        print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))
+        return 0
 
 
 @dataclasses.dataclass(frozen=True)

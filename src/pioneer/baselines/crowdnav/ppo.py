@@ -67,8 +67,6 @@ deleted.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -81,9 +79,9 @@ import torch
 from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
-from pioneer.errors import ConfigError, expect
 from pioneer.interrupt import Interrupted, deferred
 from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
+from pioneer.nn.ppo import check_resume, curve_csv
 from pioneer.progress import progress_bar
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
@@ -92,19 +90,10 @@ __all__ = ["CURVE_COLUMNS", "PPOConfig", "compute_gae", "train_crowdnav"]
 
 
 # ------------------------------------------------------------------------------ outputs
-def _curve_csv(rows: list[list[float]]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(CURVE_COLUMNS)
-    for r in rows:
-        w.writerow([int(r[0]), int(r[1]), int(r[2]), *(f"{x:.6g}" for x in r[3:])])
-    return buf.getvalue()
-
-
 def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool) -> None:
     tr.save(out / "checkpoint.safetensors")
     save_crowdnav(tr.model, out / "policy.safetensors", info)
-    write_text_atomic(out / "curve.csv", _curve_csv(tr.curve))
+    write_text_atomic(out / "curve.csv", curve_csv(CURVE_COLUMNS, tr.curve))
     if final:
         from pioneer.viz.plots import plot_learning_curve
 
@@ -116,18 +105,6 @@ def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool
             + ("imitation + PPO" if tr.warm.bc_episodes else "PPO"),
         )
         write_text_atomic(out / "train.json", to_json(dict(info), indent=2) + "\n")
-
-
-def _check_resume(resume: bool | None, ckpt: Path, out: Path) -> None:
-    """``--resume`` needs a checkpoint; a fresh start (``resume=False``) refuses one."""
-    if resume is True and not ckpt.is_file():
-        raise ConfigError(
-            expect("--resume", f"a checkpoint at {ckpt}", "none", "drop --resume to start afresh")
-        )
-    if resume is False and ckpt.is_file():
-        raise ConfigError(
-            expect("--out", "a folder without a checkpoint", str(out), "resume or use a new --out")
-        )
 
 
 def _train_loop(
@@ -218,7 +195,7 @@ def train_crowdnav(
     sc = get_scenario(scenario)
     out = output_dir_kind(out_dir)
     ckpt = out / "checkpoint.safetensors"
-    _check_resume(resume, ckpt, out)
+    check_resume(resume, ckpt, out)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
     # One spatial-edge slot per human of the scenario unless configured otherwise.
@@ -226,7 +203,7 @@ def train_crowdnav(
     warm = warm or WarmStartConfig()
     tr = _Trainer(sc, ppo, net, reward or CrowdNavRewardConfig(), warm)
     with run_lock(out):
-        _check_resume(resume, ckpt, out)  # again, holding the lock
+        check_resume(resume, ckpt, out)  # again, holding the lock
         return _train(tr, out, ckpt, warm, command, progress, on_update)
 
 

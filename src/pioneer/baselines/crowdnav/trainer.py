@@ -26,6 +26,7 @@ from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.io import atomic_path
 from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
+from pioneer.nn.ppo import clipped_surrogate, compute_gae
 from pioneer.nn.recurrent import gru_sequence
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event, classify
@@ -89,28 +90,6 @@ class PPOConfig(Config):
     def updates(self) -> int:
         """Updates needed for ``total_steps`` (rounded up)."""
         return -(-self.total_steps // self.steps_per_update)
-
-
-# ------------------------------------------------------------------------------ reward, GAE
-def compute_gae(
-    rewards: F64, values: F64, dones: F64, last_value: F64, gamma: float, lam: float
-) -> tuple[F64, F64]:
-    """Generalised advantage estimates and returns, both ``(T, B)``.
-
-    ``rewards``, ``values`` (V(s_t)), ``dones`` (1: the episode ended with step t) are
-    ``(T, B)``; ``last_value`` is V of the state after the last step ``(B,)``.
-    δ_t = r_t + γ V_{t+1} (1 − d_t) − V_t,  A_t = δ_t + γ λ (1 − d_t) A_{t+1};  R_t = A_t + V_t.
-    """
-    t_len = rewards.shape[0]
-    adv = np.zeros_like(rewards, dtype=np.float64)
-    last = np.zeros(rewards.shape[1:], dtype=np.float64)
-    for t in range(t_len - 1, -1, -1):
-        nxt = last_value if t == t_len - 1 else values[t + 1]
-        keep = 1.0 - dones[t]
-        delta = rewards[t] + gamma * nxt * keep - values[t]
-        last = delta + gamma * lam * keep * last
-        adv[t] = last
-    return adv, adv + values
 
 
 # ------------------------------------------------------------------------------ state helpers
@@ -280,9 +259,7 @@ class _Trainer:
                 mean, value = model.heads(hs)
                 dist = _normal(mean, torch.exp(model.log_std))
                 logp = dist.log_prob(batch["action"][:, idx]).sum(-1)
-                ratio = torch.exp(logp - batch["logp"][:, idx])
-                a = adv[:, idx]
-                pg = -torch.min(ratio * a, ratio.clamp(1 - ppo.clip, 1 + ppo.clip) * a).mean()
+                pg = clipped_surrogate(logp, batch["logp"][:, idx], adv[:, idx], ppo.clip)
                 vl = 0.5 * ((batch["ret"][:, idx] - value) ** 2).mean()
                 ent = dist.entropy().sum(-1).mean()
                 loss = pg + ppo.value_coef * vl - ppo.entropy_coef * ent

@@ -1,0 +1,176 @@
+"""The students' reinforcement-learning fine-tuning: its environments, the critic's privileged
+view, the reward it is paid, the schedule of the pull, resuming and the command line."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, _Trainer, finetune_student
+from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
+from pioneer.learn.models import StudentConfig, build_student, load_student, save_student
+from pioneer.reward.crowdnav import crowdnav_reward_terms
+from pioneer.sim.events import Event
+from pioneer.sim.scenarios import get_scenario, sample_state
+from pioneer.sim.world import State
+from pioneer_testutils import file_tree, one_error_line, run_cli
+
+TINY = FinetuneConfig(
+    total_steps=4 * 2 * 2 * 8,  # 4 updates
+    groups=2,
+    group_size=2,
+    rollout=8,
+    layout_period=2,
+    epochs=2,
+    minibatches=2,
+    critic_warmup=1,
+    critic_hidden=(16,),
+    kl_fade=2 * 2 * 2 * 8,  # 2 updates
+    checkpoint_every=1,
+)
+
+
+def _student(tmp_path: Path, **kw: object) -> Path:
+    cfg = StudentConfig(hidden=(16,), previous_observation=True, previous_command=True, **kw)
+    model = build_student(cfg, seed=3)
+    gen = torch.Generator().manual_seed(0)
+    model.set_normalizer(torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2))
+    return save_student(model, tmp_path / "start.safetensors")
+
+
+def test_privileged_matches_a_brute_force_frame_change() -> None:
+    sc = get_scenario("hr-rl")
+    st = State.concat([sample_state(sc, np.random.default_rng(s)) for s in range(3)])
+    st.t[:] = [0.0, 3.0, 100.0]
+    out = privileged(st, 30.0, 6)
+    for b in range(3):
+        x, y, th = st.robot[b]
+        rot = np.array([[math.cos(th), math.sin(th)], [-math.sin(th), math.cos(th)]])
+        assert out[b, 0] == pytest.approx(st.t[b] / 30.0)
+        np.testing.assert_allclose(out[b, 1:3], rot @ (st.goal[b] - [x, y]), atol=1e-5)
+        for i in range(st.n_humans):
+            row = out[b, ROBOT_FEATURES + HUMAN_FEATURES * i :][:HUMAN_FEATURES]
+            present = bool(st.humans_present[b, i])
+            np.testing.assert_allclose(
+                row[:2], rot @ (st.h_pos[b, i] - [x, y]) if present else 0.0, atol=1e-5
+            )
+            np.testing.assert_allclose(row[2:4], rot @ st.h_vel[b, i] if present else 0, atol=1e-5)
+            assert row[5] == present
+            assert row[6] == (st.t[b] < st.h_delay[b, i])
+    assert not out[:, ROBOT_FEATURES + HUMAN_FEATURES * st.n_humans :].any()  # unused slots
+
+
+def test_the_reward_pays_arriving_and_charges_collisions_without_intrusion() -> None:
+    assert FINETUNE_REWARD.intrusion == 0.0
+    sc = get_scenario("hr-rl")
+    world = sc.world()
+    prev = sample_state(sc, np.random.default_rng(0))
+    new = prev.copy()
+    new.robot[0, :2] += (
+        0.1 * (prev.goal[0] - prev.robot[0, :2]) / np.linalg.norm(prev.goal[0] - prev.robot[0, :2])
+    )
+    new.command[0] = (0.5, 0.0)
+    new.gap[0] = np.inf
+    new.h_pos[0] += 50.0  # every person far from the robot
+    for event, want in ((Event.NONE, 3.0 * 0.1), (Event.SUCCESS, 10.0), (Event.COLLISION, -20.0)):
+        terms, total = crowdnav_reward_terms(
+            world, prev, new, np.array([event], dtype=np.int8), FINETUNE_REWARD
+        )
+        assert terms["intrusion"][0] == 0.0
+        assert total[0] == pytest.approx(want)
+
+
+def test_inputs_start_each_episode_afresh_and_carry_the_command_run(tmp_path: Path) -> None:
+    model = load_student(_student(tmp_path))
+    rng = np.random.default_rng(0)
+    envs = LayoutEnvs(["hr-rl"], 1, 3, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
+    x = envs.student_inputs()
+    obs_dim = envs.obs.shape[1]
+    np.testing.assert_array_equal(x[:, :obs_dim], x[:, obs_dim : 2 * obs_dim])
+    assert not x[:, 2 * obs_dim :].any()
+    before = envs.obs.copy()
+    envs.step(np.tile([0.3, 0.2], (3, 1)))
+    x = envs.student_inputs()
+    np.testing.assert_array_equal(x[:, obs_dim : 2 * obs_dim], before)
+    np.testing.assert_allclose(x[:, 2 * obs_dim :], np.tile([0.3, 0.2], (3, 1)), atol=1e-6)
+
+
+def test_the_pull_fades_linearly_to_zero(tmp_path: Path) -> None:
+    tr = _Trainer(load_student(_student(tmp_path)), ["hr-rl"], dataclasses.replace(TINY))
+    betas = []
+    for u in range(TINY.updates + 1):
+        tr.env_steps = u * TINY.steps_per_update
+        betas.append(tr.kl_coef())
+    assert betas == pytest.approx([1.0, 0.5, 0.0, 0.0, 0.0])
+
+
+def test_a_symmetric_student_stays_mirror_equivariant(tmp_path: Path) -> None:
+    src = _student(tmp_path, symmetric=True)
+    finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "run", TINY, progress=False)
+    model = load_student(tmp_path / "run" / "student.safetensors")
+    assert not torch.equal(model.state_dict()["mu_head.weight"], load_student(src).mu_head.weight)
+    rng = np.random.default_rng(1)
+    envs = LayoutEnvs(["hr-rl"], 1, 8, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
+    rows = []
+    for _ in range(4):  # inputs as the robot reads them
+        envs.step(np.tile([0.4, 0.3], (8, 1)))
+        rows.append(envs.student_inputs())
+    x = torch.from_numpy(np.concatenate(rows))
+    with torch.no_grad():
+        u = model.deterministic_action(x)
+        um = model.deterministic_action(model.mirror(x))
+    torch.testing.assert_close(um, u * torch.tensor([1.0, -1.0]), atol=1e-5, rtol=1e-5)
+
+
+def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+    src = _student(tmp_path)
+    whole = finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "a", TINY, progress=False)
+    half = dataclasses.replace(TINY, total_steps=TINY.total_steps // 2)
+    finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "b", half, progress=False)
+    resumed = finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "b", TINY, progress=False)
+    assert resumed["resumed_from_update"] == 2 and resumed["updates"] == whole["updates"] == 4
+    a = load_file(tmp_path / "a" / "student.safetensors")
+    b = load_file(tmp_path / "b" / "student.safetensors")
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    curves = [(tmp_path / d / "curve.csv").read_text().splitlines() for d in "ab"]
+    assert [r.rsplit(",", 1)[0] for r in curves[0]] == [r.rsplit(",", 1)[0] for r in curves[1]]
+    with pytest.raises(Exception, match="settings"):
+        finetune_student(
+            src, ["hr-rl"], tmp_path / "b", dataclasses.replace(TINY, lr=1e-3), progress=False
+        )
+
+
+def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Path) -> None:
+    src = _student(tmp_path)
+    (tmp_path / "student.safetensors").write_bytes(src.read_bytes())  # a run's own output
+    before = file_tree(tmp_path)
+    missing = run_cli("finetune", "--out", str(tmp_path / "run"), "--student",
+                      str(tmp_path / "none.safetensors"), "--scenario", "hr-rl")  # fmt: skip
+    one_error_line(missing.stderr, missing.returncode, "none.safetensors")
+    onto = run_cli("finetune", "--out", str(tmp_path), "--student", str(tmp_path /
+                   "student.safetensors"), "--scenario", "hr-rl")  # fmt: skip
+    one_error_line(onto.stderr, onto.returncode, "input")
+    unknown = run_cli("finetune", "--out", str(tmp_path / "run"), "--student", str(src),
+                      "--scenario", "no-such-world")  # fmt: skip
+    one_error_line(unknown.stderr, unknown.returncode, "no-such-world")
+    assert file_tree(tmp_path) == before
+
+
+def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
+    src = _student(tmp_path)
+    out = tmp_path / "run"
+    args = ["--steps", "64", "--groups", "1", "--group-size", "2", "--rollout", "16"]
+    proc = run_cli("finetune", "--out", str(out), "--student", str(src), "--scenario", "hr-rl",
+                   "--critic-warmup", "0", *args)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.splitlines()[0])["updates"] == 2
+    for name in ("student.safetensors", "checkpoint.safetensors", "curve.csv", "train.json"):
+        assert (out / name).is_file()
+    assert load_student(out / "student.safetensors").config == load_student(src).config
