@@ -41,6 +41,7 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights (NumPy; torch  <= 1 ms
                           beside it, 1 thread)
 - ``crowdnav_train_throughput``  PPO trainer env steps/s, 16 and 32 envs       >= 2,000 /s (32)
+- ``finetune_throughput`` students' PPO fine-tuning env steps/s (64 copies)   >= 20,000 /s
 - ``vector_env``          64 envs: native vector env vs ``SyncVectorEnv``      native >= 5x sync
 """
 
@@ -105,6 +106,7 @@ BENCHMARKS: dict[str, Callable[[Plan], Result]] = {
     "harness_scaling": harness.bench_harness_scaling,
     "crowdnav_decision": learn.bench_crowdnav_decision,
     "crowdnav_train_throughput": learn.bench_crowdnav_train_throughput,
+    "finetune_throughput": learn.bench_finetune_throughput,
     "vector_env": vector.bench_vector_env,
 }
 OPT_IN = ("dagger_run", "harness_scaling")  # run only when named with --only (minutes long)

@@ -90,7 +90,7 @@ def test_the_reward_pays_arriving_and_charges_collisions_without_intrusion() -> 
 def test_inputs_start_each_episode_afresh_and_carry_the_command_run(tmp_path: Path) -> None:
     model = load_student(_student(tmp_path))
     rng = np.random.default_rng(0)
-    envs = LayoutEnvs(["hr-rl"], 1, 3, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
+    envs = LayoutEnvs([["hr-rl"]], 1, 3, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
     x = envs.student_inputs()
     obs_dim = envs.obs.shape[1]
     np.testing.assert_array_equal(x[:, :obs_dim], x[:, obs_dim : 2 * obs_dim])
@@ -103,7 +103,7 @@ def test_inputs_start_each_episode_afresh_and_carry_the_command_run(tmp_path: Pa
 
 
 def test_the_pull_fades_linearly_to_zero(tmp_path: Path) -> None:
-    tr = _Trainer(load_student(_student(tmp_path)), ["hr-rl"], dataclasses.replace(TINY))
+    tr = _Trainer(load_student(_student(tmp_path)), [["hr-rl"]], dataclasses.replace(TINY))
     betas = []
     for u in range(TINY.updates + 1):
         tr.env_steps = u * TINY.steps_per_update
@@ -117,7 +117,7 @@ def test_a_symmetric_student_stays_mirror_equivariant(tmp_path: Path) -> None:
     model = load_student(tmp_path / "run" / "student.safetensors")
     assert not torch.equal(model.state_dict()["mu_head.weight"], load_student(src).mu_head.weight)
     rng = np.random.default_rng(1)
-    envs = LayoutEnvs(["hr-rl"], 1, 8, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
+    envs = LayoutEnvs([["hr-rl"]], 1, 8, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
     rows = []
     for _ in range(4):  # inputs as the robot reads them
         envs.step(np.tile([0.4, 0.3], (8, 1)))

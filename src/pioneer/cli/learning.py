@@ -128,7 +128,8 @@ class Finetune:
     student: Annotated[str, metavar("FILE"), Input("file")]
     """the DAgger student to start from (.safetensors)"""
     scenario: Annotated[tuple[str, ...], metavar("NAME")] = ("general-*",)
-    """scenarios or patterns (general-*: the layouts of `pioneer --scenarios FILE`)"""
+    """scenarios or patterns (general-*: the layouts of `pioneer --scenarios FILE`), each drawn
+    equally often"""
     finetune: tyro.conf.OmitArgPrefixes[FinetuneConfig] = FinetuneConfig()
     """fine-tuning settings"""
     threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")

@@ -170,8 +170,8 @@ class Critic(nn.Module):
 class _Trainer:
     """Everything that changes during fine-tuning (saved whole in the checkpoint)."""
 
-    def __init__(self, start: Student, names: Sequence[str], cfg: FinetuneConfig) -> None:
-        self.cfg, self.names = cfg, list(names)
+    def __init__(self, start: Student, names: Sequence[Sequence[str]], cfg: FinetuneConfig) -> None:
+        self.cfg, self.names = cfg, [list(n) for n in names]
         self.actor = start.eval()
         self.ref = copy.deepcopy(start).eval().requires_grad_(False)
         gen = torch.Generator().manual_seed(cfg.seed)
@@ -426,7 +426,7 @@ def _write_outputs(tr: _Trainer, out: Path, info: dict[str, Any], final: bool) -
         plot_learning_curve(
             {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
             out / "curve.png",
-            title=f"student fine-tuning · {len(tr.names)} scenario(s)",
+            title=f"student fine-tuning · {sum(map(len, tr.names))} scenario(s)",
         )
         write_text_atomic(out / "train.json", to_json(info, indent=2) + "\n")
 
@@ -443,7 +443,8 @@ def finetune_student(
     on_update: Callable[[dict[str, float]], None] | None = None,
 ) -> dict[str, Any]:
     """Fine-tune (or resume) the student at ``student`` over ``scenarios`` (names or patterns
-    such as ``general-*``); returns the summary written to ``train.json``.
+    such as ``general-*``; each entry drawn equally often, a pattern's matches uniformly);
+    returns the summary written to ``train.json``.
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
     ``True`` requires it, ``False`` refuses it. Every input is checked before ``out`` is
@@ -452,12 +453,12 @@ def finetune_student(
     from pioneer.learn.dagger import scenario_set
 
     cfg = config or FinetuneConfig()
-    names = sorted({n for pattern in scenarios for n in scenario_set(pattern)})
-    if not names:
+    if not scenarios:
         raise ConfigError(expect("--scenario", "one or more scenarios", "none", "name one"))
+    names = [scenario_set(pattern) for pattern in scenarios]
     src = Path(student)
     start = load_student(src)
-    obs_dims = {_obs_dim(n) for n in names}
+    obs_dims = {_obs_dim(n) for pool in names for n in pool}
     if obs_dims != {start.config.obs_dim}:
         raise DataError(
             expect(

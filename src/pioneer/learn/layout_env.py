@@ -102,7 +102,9 @@ class _Group:
 
 
 class LayoutEnvs:
-    """``groups`` × ``group_size`` copies over the layouts ``names`` (module docstring).
+    """``groups`` × ``group_size`` copies over the layouts ``names`` (module docstring): a
+    sequence of name sets, each drawn equally often, a layout uniformly within its set (e.g.
+    ``[["general-0000", …], ["hr-rl"], ["hl-rr"]]``: a third each).
 
     ``rng`` draws the layouts and the episodes' seed numbers (its state is the caller's to
     save); ``seed`` is the run's, mixed into every episode's training seed.
@@ -110,7 +112,7 @@ class LayoutEnvs:
 
     def __init__(
         self,
-        names: Sequence[str],
+        names: Sequence[Sequence[str]],
         groups: int,
         group_size: int,
         inputs: StudentInputs,
@@ -119,7 +121,8 @@ class LayoutEnvs:
         seed: int,
         max_humans: int,
     ) -> None:
-        self.names, self.size, self.inputs, self.reward = list(names), group_size, inputs, reward
+        self.names = [list(n) for n in names]
+        self.size, self.inputs, self.reward = group_size, inputs, reward
         self.rng, self.seed, self.max_humans = rng, seed, max_humans
         self.episode_count = 0  # episodes started: the k of finetune_seed
         self.groups: list[_Group] = []
@@ -146,7 +149,8 @@ class LayoutEnvs:
         return sample_state(scenario, np.random.default_rng(seed))
 
     def _new_group(self) -> _Group:
-        name = self.names[int(self.rng.integers(len(self.names)))]
+        pool = self.names[int(self.rng.integers(len(self.names)))]
+        name = pool[int(self.rng.integers(len(pool)))]
         sc = get_scenario(name)
         state = State.concat([self._episode(sc) for _ in range(self.size)])
         obs_rng = np.random.default_rng(finetune_seed(self.seed, self.episode_count, "lidar"))
