@@ -83,7 +83,7 @@ from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_train
 from pioneer.nn.layers import seeded_linear
 from pioneer.nn.ppo import check_resume, clipped_surrogate, compute_gae, curve_csv
 from pioneer.progress import progress_bar
-from pioneer.reward.crowdnav import CrowdNavRewardConfig
+from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer.sim.events import Event
 
 __all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "FinetuneConfig", "finetune_student"]
@@ -101,8 +101,7 @@ CURVE_COLUMNS = (
     "std",
     "wall_time_s",
 )
-# The CrowdNav++ reward without the intrusion term (module docstring).
-FINETUNE_REWARD = CrowdNavRewardConfig(intrusion=0.0)
+FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
 MAX_HUMANS = 6  # person slots of the critic's privileged view
 
 

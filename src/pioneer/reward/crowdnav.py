@@ -35,6 +35,7 @@ from pioneer.sim.events import Event
 from pioneer.sim.world import State, World
 
 __all__ = [
+    "NO_INTRUSION",
     "TERMS",
     "CrowdNavReward",
     "CrowdNavRewardConfig",
@@ -62,6 +63,11 @@ class CrowdNavRewardConfig(Config):
     # [s] the original's step T: per-step terms are rescaled to Δt (None: charged per step)
     reference_dt: Positive | None = 0.25
 
+
+# Beyond CrowdNav++: the reward without its intrusion term, in which arriving pays more than
+# waiting beside the door (with it, waiting costs ≈ −4 an episode and the teacher's own
+# successes −14.4 in HR-RL: docs/baselines.md). The students' fine-tuning is paid with it.
+NO_INTRUSION = CrowdNavRewardConfig(intrusion=0.0)
 
 _COLLISION, _SUCCESS = int(Event.COLLISION), int(Event.SUCCESS)  # plain ints: no enum lookup
 # The rows of the terms the kernel fills, in the order of ``crowdnav_reward_terms``'s dict.
