@@ -15,7 +15,13 @@ from safetensors.torch import load_file
 
 from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, _Trainer, finetune_student
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
-from pioneer.learn.models import StudentConfig, build_student, load_student, save_student
+from pioneer.learn.models import (
+    StudentConfig,
+    build_student,
+    load_student,
+    read_checkpoint_meta,
+    save_student,
+)
 from pioneer.reward.crowdnav import crowdnav_reward_terms
 from pioneer.sim.events import Event
 from pioneer.sim.scenarios import get_scenario, sample_state
@@ -42,7 +48,7 @@ def _student(tmp_path: Path, **kw: object) -> Path:
     model = build_student(cfg, seed=3)
     gen = torch.Generator().manual_seed(0)
     model.set_normalizer(torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2))
-    return save_student(model, tmp_path / "start.safetensors")
+    return save_student(model, tmp_path / "start.safetensors", {"dagger": {"seed": 7}})
 
 
 def test_privileged_matches_a_brute_force_frame_change() -> None:
@@ -174,3 +180,5 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     for name in ("student.safetensors", "checkpoint.safetensors", "curve.csv", "train.json"):
         assert (out / name).is_file()
     assert load_student(out / "student.safetensors").config == load_student(src).config
+    info = read_checkpoint_meta(out / "student.safetensors")["info"]
+    assert info["dagger"] == {"seed": 7} and info["finetune"]["updates"] == 2  # both records

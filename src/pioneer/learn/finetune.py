@@ -78,7 +78,7 @@ from pioneer.io import (
     write_text_atomic,
 )
 from pioneer.learn.layout_env import LayoutEnvs, privileged_width
-from pioneer.learn.models import Student, load_student, save_student
+from pioneer.learn.models import Student, load_student, read_checkpoint_meta, save_student
 from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
 from pioneer.nn.layers import seeded_linear
 from pioneer.nn.ppo import check_resume, clipped_surrogate, compute_gae, curve_csv
@@ -171,6 +171,7 @@ class _Trainer:
 
     def __init__(self, start: Student, names: Sequence[Sequence[str]], cfg: FinetuneConfig) -> None:
         self.cfg, self.names = cfg, [list(n) for n in names]
+        self.start_info: dict[str, Any] = {}  # the starting student's checkpoint info
         self.actor = start.eval()
         self.ref = copy.deepcopy(start).eval().requires_grad_(False)
         gen = torch.Generator().manual_seed(cfg.seed)
@@ -416,7 +417,8 @@ class _Trainer:
 # ------------------------------------------------------------------------------ the run
 def _write_outputs(tr: _Trainer, out: Path, info: dict[str, Any], final: bool) -> None:
     tr.save(out / "checkpoint.safetensors", info["settings"])
-    save_student(tr.actor, out / "student.safetensors", {"finetune": info})
+    # the DAgger student's own record (its recipe, scenario, losses) stays, beside this run's
+    save_student(tr.actor, out / "student.safetensors", {**tr.start_info, "finetune": info})
     write_text_atomic(out / "curve.csv", curve_csv(CURVE_COLUMNS, tr.curve))
     if final:
         from pioneer.viz.plots import plot_learning_curve
@@ -474,6 +476,7 @@ def finetune_student(
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
     tr = _Trainer(start, names, cfg)
+    tr.start_info = {k: v for k, v in read_checkpoint_meta(src)["info"].items() if k != "finetune"}
     settings = tr.settings(file_sha256(src))
     with run_lock(out):
         check_resume(resume, ckpt, out)  # again, holding the lock
