@@ -121,7 +121,7 @@ class Distill:
 @dataclasses.dataclass(frozen=True)
 class Finetune:
     """Fine-tune a DAgger student with PPO over scenarios or a layout distribution (resumes an
-    existing --out; docs/student.md)."""
+    existing --out; docs/general-student.md)."""
 
     out: OutDir
     """output folder (student, checkpoint, curve)"""

@@ -132,8 +132,8 @@ class DaggerConfig(Config):
     label_prev: LabelPrev = "applied"
     margins: SoftMargins = SoftMargins()  # the teacher's soft margins while it labels
     # Beyond the paper: what the labelling teacher's predictions assume of every person in
-    # place of what the student cannot see (docs/student.md, "Which variation costs the
-    # student")
+    # place of what the student cannot see (docs/notes/2026-11-24-general-student-recipes.md, "Which
+    # variation costs the student")
     assume: Assumptions = Assumptions()
     # Beyond the paper: how long the labelling teacher holds to its margins and learned term
     # without progress (docs/teacher.md, "Patience")

@@ -1,5 +1,5 @@
 """A randomised distribution of elevator layouts and human behaviour, for one student that
-drives in many worlds (beyond the paper; docs/student.md, "One student for many worlds").
+drives in many worlds (beyond the paper; docs/general-student.md).
 
 :class:`LayoutDistribution` holds the ranges (door and lobby size, cabin, number, speed and size
 of the humans, their reaction to the robot, LiDAR noise, which side they board); the start
