@@ -327,37 +327,42 @@ def bench_crowdnav_train_throughput(plan: Plan) -> Result:
 
 def bench_finetune_throughput(plan: Plan) -> Result:
     """Environment steps/s of the students' PPO fine-tuning (``pioneer finetune``'s defaults:
-    8 layouts × 8 copies, 64-step rollouts, one torch thread), rollout and update together
-    including the student's and the critic's forward passes, per update after a warm-up one;
-    the shipped general student over the two paper worlds (each group one world)."""
+    8 layouts × 8 copies, 64-step rollouts), rollout and update together including the
+    student's and the critic's forward passes, per update after a warm-up one; the shipped
+    general student (symmetric: two passes of its network) over the two paper worlds, on one
+    torch thread (the default) and on two (``--threads 2``: both cores of the 2-core
+    machine for the update)."""
     import torch
 
     from pioneer.data import shipped_student
     from pioneer.learn.finetune import FinetuneConfig, _Trainer
     from pioneer.learn.models import load_student
 
-    torch.set_num_threads(1)
     n_updates = 3 if mode(plan) == "quick" else 10
     cfg = FinetuneConfig(critic_warmup=0, seed=SEED % 1000)
-    tr = _Trainer(load_student(shipped_student("", "mdn", True)), [["hr-rl"], ["hl-rr"]], cfg)
-    tr.learn(tr.rollout())
-    tr.end_update()
-    rates, rollout_s, update_s = [], [], []
-    for _ in range(n_updates):
-        t0 = time.perf_counter()
-        batch = tr.rollout()
-        t1 = time.perf_counter()
-        tr.learn(batch)
+    metrics: dict[str, Any] = {}
+    for threads in (1, 2):
+        torch.set_num_threads(threads)
+        tr = _Trainer(load_student(shipped_student("", "mdn", True)), [["hr-rl"], ["hl-rr"]], cfg)
+        tr.learn(tr.rollout())
         tr.end_update()
-        t2 = time.perf_counter()
-        rates.append(cfg.steps_per_update / (t2 - t0))
-        rollout_s.append(t1 - t0)
-        update_s.append(t2 - t1)
+        rates, rollout_s, update_s = [], [], []
+        for _ in range(n_updates):
+            t0 = time.perf_counter()
+            batch = tr.rollout()
+            t1 = time.perf_counter()
+            tr.learn(batch)
+            tr.end_update()
+            t2 = time.perf_counter()
+            rates.append(cfg.steps_per_update / (t2 - t0))
+            rollout_s.append(t1 - t0)
+            update_s.append(t2 - t1)
+        target: Target | None = (">=", 20_000.0) if threads == 2 else None
+        metrics[f"steps_per_s_{threads}_threads"] = metric(rates, "steps/s", target)
+        metrics[f"rollout_s_{threads}_threads"] = metric(rollout_s, "s")
+        metrics[f"update_s_{threads}_threads"] = metric(update_s, "s")
+    torch.set_num_threads(1)
     return {
-        "metrics": {
-            "steps_per_s": metric(rates, "steps/s", (">=", 20_000.0)),
-            "rollout_s": metric(rollout_s, "s"),
-            "update_s": metric(update_s, "s"),
-        },
-        "info": {"envs": cfg.envs, "rollout": cfg.rollout, "updates": n_updates, "threads": 1},
+        "metrics": metrics,
+        "info": {"envs": cfg.envs, "rollout": cfg.rollout, "updates": n_updates},
     }
