@@ -127,9 +127,9 @@ class Finetune:
     """output folder (student, checkpoint, curve)"""
     student: Annotated[str, metavar("FILE"), Input("file")]
     """the DAgger student to start from (.safetensors)"""
-    scenario: Annotated[tuple[str, ...], metavar("NAME")] = ("general-*",)
+    scenario: Annotated[tuple[str, ...], metavar("NAME")] = ("general-*", "hr-rl", "hl-rr")
     """scenarios or patterns (general-*: the layouts of `pioneer --scenarios FILE`), each drawn
-    equally often"""
+    equally often (the default: student-general's)"""
     finetune: tyro.conf.OmitArgPrefixes[FinetuneConfig] = FinetuneConfig()
     """fine-tuning settings"""
     threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")

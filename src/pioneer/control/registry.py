@@ -262,7 +262,7 @@ _BUILTINS = (
     _builtin(
         "student-general",
         "pioneer.learn.policy:make_student_policy",
-        "one MDN student for many elevator layouts: DAgger, then PPO fine-tuning (beyond the paper)",
+        "one MDN student for many elevator layouts, DAgger then PPO (beyond the paper)",
         **_STUDENT_PARTS,
         extra="learn",
         kind="mdn",

@@ -18,12 +18,13 @@ teacher chooses among all feasible ones. If none is feasible the teacher stops a
 comes latest. An optional ``extra_score`` hook adds a scenario-specific term (the courteous
 demonstrator uses it to yield to people leaving the elevator).
 
-Beyond the paper, for a teacher whose student must drive many worlds (docs/notes/2026-11-24-general-student-recipes.md,
-"Which variation costs the student"): ``assume`` replaces, in the teacher's own predictions only,
-what a student cannot read from a scan by one value for every world — every person at least
-``human_radius`` large, every person reacting to the robot with ``a_robot``, every person who
-has not started walking starting now (``start_now``: they may at any moment). The world the
-robot drives in is unchanged; where its people already are so, the decisions are the same.
+Beyond the paper, for a teacher whose student must drive many worlds (the research log
+docs/notes/2026-11-24-general-student-recipes.md, "Which variation costs the student"):
+``assume`` replaces, in the teacher's own predictions only, what a student cannot read from
+a scan by one value for every world — every person at least ``human_radius`` large, every
+person reacting to the robot with ``a_robot``, every person who has not started walking
+starting now (``start_now``: they may at any moment). The world the robot drives in is
+unchanged; where its people already are so, the decisions are the same.
 """
 
 from __future__ import annotations

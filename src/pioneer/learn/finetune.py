@@ -109,7 +109,7 @@ MAX_HUMANS = 6  # person slots of the critic's privileged view
 class FinetuneConfig(Config):
     """Settings of a fine-tuning run (module docstring)."""
 
-    total_steps: Count = 1_000_000  # env steps (all copies together)
+    total_steps: Count = 6_000_000  # env steps (all copies together)
     groups: Count = 8  # layouts stepped at once
     group_size: Count = 8  # copies of each layout
     rollout: Count = 64  # steps per copy per update
