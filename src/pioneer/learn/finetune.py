@@ -67,7 +67,7 @@ from torch import nn
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
 from pioneer.config import Config
 from pioneer.errors import ConfigError, DataError, expect
-from pioneer.interrupt import Interrupted, deferred
+from pioneer.interrupt import Interrupted
 from pioneer.io import (
     atomic_path,
     check_not_input,
@@ -81,8 +81,14 @@ from pioneer.learn.layout_env import LayoutEnvs, privileged_width
 from pioneer.learn.models import Student, load_student, read_checkpoint_meta, save_student
 from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
 from pioneer.nn.layers import seeded_linear
-from pioneer.nn.ppo import check_resume, clipped_surrogate, compute_gae, curve_csv
-from pioneer.progress import progress_bar
+from pioneer.nn.ppo import (
+    check_resume,
+    clipped_surrogate,
+    compute_gae,
+    curve_csv,
+    update_loop,
+    window_row,
+)
 from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer.sim.events import Event
 
@@ -314,19 +320,12 @@ class _Trainer:
             for g in range(self.cfg.groups):
                 self.envs.redraw(g)
             self.ep_return[:] = 0.0  # the cut episodes are not counted
-        ev = np.asarray(self.win_event)
-
-        def rate(code: int) -> float:
-            return float(np.mean(ev == code)) if ev.size else math.nan
-
+        codes = (Event.SUCCESS, Event.COLLISION, Event.TIMEOUT)
         row = [
             float(self.update),
             float(self.env_steps),
             float(self.episodes),
-            float(np.mean(self.win_return)) if self.win_return else math.nan,
-            rate(Event.SUCCESS),
-            rate(Event.COLLISION),
-            rate(Event.TIMEOUT),
+            *window_row(self.win_return, self.win_event, codes),
             self.kl_coef(),
             float(torch.exp(self.log_std.detach()).mean()),
             self.wall,
@@ -528,31 +527,14 @@ def _loop(
     on_update: Callable[[dict[str, float]], None] | None,
 ) -> None:
     cfg = tr.cfg
-    bar = progress_bar(
-        total=cfg.updates * cfg.steps_per_update,
-        initial=tr.env_steps,
-        unit="step",
-        desc="fine-tuning",
-        enabled=progress,
-        mininterval=2.0,
+    update_loop(
+        tr,
+        cfg.updates,
+        cfg.steps_per_update,
+        CURVE_COLUMNS,
+        "fine-tuning",
+        progress,
+        cfg.checkpoint_every,
+        lambda: _write_outputs(tr, out, info(), final=False),
+        on_update,
     )
-    t_start, s_start = time.perf_counter(), tr.env_steps
-    try:
-        while tr.update < cfg.updates:
-            with deferred():  # a signal stops the run between two updates, never inside one
-                t0 = time.perf_counter()
-                stats = tr.learn(tr.rollout())
-                tr.wall += time.perf_counter() - t0
-                row = tr.end_update()
-                rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
-                bar.update(cfg.steps_per_update)
-                bar.set_postfix(
-                    {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
-                    refresh=False,
-                )
-                if on_update is not None:
-                    on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
-                if tr.update % cfg.checkpoint_every == 0 and tr.update < cfg.updates:
-                    _write_outputs(tr, out, info(), final=False)
-    finally:
-        bar.close()

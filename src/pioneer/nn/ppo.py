@@ -9,16 +9,29 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+import math
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
 
 from pioneer.errors import ConfigError, expect
+from pioneer.interrupt import deferred
+from pioneer.progress import progress_bar
 
-__all__ = ["check_resume", "clipped_surrogate", "compute_gae", "curve_csv"]
+__all__ = [
+    "PPOTrainer",
+    "check_resume",
+    "clipped_surrogate",
+    "compute_gae",
+    "curve_csv",
+    "update_loop",
+    "window_row",
+]
 
 F64 = NDArray[np.float64]
 
@@ -74,3 +87,79 @@ def curve_csv(columns: Sequence[str], rows: Sequence[Sequence[float]], ints: int
     for r in rows:
         w.writerow([*(int(x) for x in r[:ints]), *(f"{x:.6g}" for x in r[ints:])])
     return buf.getvalue()
+
+
+def window_row(
+    returns: Sequence[float], events: Sequence[int], codes: Sequence[int]
+) -> list[float]:
+    """A learning curve's running statistics over the last finished episodes: their mean
+    return, then the share of each event code in ``codes`` (NaN before the first episode)."""
+    ev = np.asarray(events)
+    mean = float(np.mean(returns)) if len(returns) else math.nan
+    return [mean, *(float(np.mean(ev == c)) if ev.size else math.nan for c in codes)]
+
+
+class PPOTrainer(Protocol):
+    """What :func:`update_loop` drives: counters, one rollout, one update on it, and the end
+    of an update (counted, its learning-curve row returned)."""
+
+    update: int
+    env_steps: int
+    wall: float
+
+    def rollout(self) -> Any:
+        """Collect one rollout (no gradients)."""
+        ...
+
+    def learn(self, batch: Any) -> dict[str, float]:
+        """One update on ``batch``; its mean losses."""
+        ...
+
+    def end_update(self) -> list[float]:
+        """Count the update; its learning-curve row."""
+        ...
+
+
+def update_loop(
+    tr: PPOTrainer,
+    updates: int,
+    steps_per_update: int,
+    columns: Sequence[str],
+    desc: str,
+    progress: bool,
+    checkpoint_every: int,
+    checkpoint: Callable[[], None],
+    on_update: Callable[[dict[str, float]], None] | None,
+) -> None:
+    """Updates until ``updates``, each whole (a signal stops the run between two updates,
+    :func:`pioneer.interrupt.deferred`), with a progress bar (steps/s, the curve's mean return
+    ``columns[3]`` and success rate ``columns[4]``) and ``checkpoint()`` every
+    ``checkpoint_every`` updates before the last."""
+    bar = progress_bar(
+        total=updates * steps_per_update,
+        initial=tr.env_steps,
+        unit="step",
+        desc=desc,
+        enabled=progress,
+        mininterval=2.0,
+    )
+    t_start, s_start = time.perf_counter(), tr.env_steps
+    try:
+        while tr.update < updates:
+            with deferred():
+                t0 = time.perf_counter()
+                stats = tr.learn(tr.rollout())
+                tr.wall += time.perf_counter() - t0
+                row = tr.end_update()
+                rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
+                bar.update(steps_per_update)
+                bar.set_postfix(
+                    {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
+                    refresh=False,
+                )
+                if on_update is not None:
+                    on_update({**dict(zip(columns, row, strict=True)), **stats})
+                if tr.update % checkpoint_every == 0 and tr.update < updates:
+                    checkpoint()
+    finally:
+        bar.close()

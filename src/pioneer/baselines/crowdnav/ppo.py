@@ -79,10 +79,9 @@ import torch
 from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
-from pioneer.interrupt import Interrupted, deferred
+from pioneer.interrupt import Interrupted
 from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
-from pioneer.nn.ppo import check_resume, curve_csv
-from pioneer.progress import progress_bar
+from pioneer.nn.ppo import check_resume, curve_csv, update_loop
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
 
@@ -116,37 +115,17 @@ def _train_loop(
 ) -> None:
     """PPO updates until the budget, with a progress bar and periodic checkpoints."""
     ppo = tr.ppo
-    sc = tr.scenario
-    bar = progress_bar(
-        total=ppo.updates * ppo.steps_per_update,
-        initial=tr.env_steps,
-        unit="step",
-        desc=f"crowdnav++ {sc.name}",
-        enabled=progress,
-        mininterval=2.0,
+    update_loop(
+        tr,
+        ppo.updates,
+        ppo.steps_per_update,
+        CURVE_COLUMNS,
+        f"crowdnav++ {tr.scenario.name}",
+        progress,
+        ppo.checkpoint_every,
+        lambda: _write_outputs(tr, out, info(), final=False),
+        on_update,
     )
-    t_start, s_start = time.perf_counter(), tr.env_steps
-    try:
-        while tr.update < ppo.updates:
-            with deferred():  # a signal stops the run between two updates, never inside one
-                t0 = time.perf_counter()
-                batch = tr.rollout()
-                stats = tr.learn(batch)
-                tr.update += 1
-                tr.wall += time.perf_counter() - t0
-                row = tr.record()
-                rate = (tr.env_steps - s_start) / max(time.perf_counter() - t_start, 1e-9)
-                bar.update(ppo.steps_per_update)
-                bar.set_postfix(
-                    {"steps/s": f"{rate:.0f}", "return": f"{row[3]:.2f}", "SR": f"{row[4]:.2f}"},
-                    refresh=False,
-                )
-                if on_update is not None:
-                    on_update({**dict(zip(CURVE_COLUMNS, row, strict=True)), **stats})
-                if tr.update % ppo.checkpoint_every == 0 and tr.update < ppo.updates:
-                    _write_outputs(tr, out, info(), final=False)
-    finally:
-        bar.close()
 
 
 def _imitation(tr: _Trainer, out: Path, fresh: bool, progress: bool) -> dict[str, Any] | None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,7 @@ from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
 from pioneer.io import atomic_path
 from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
-from pioneer.nn.ppo import clipped_surrogate, compute_gae
+from pioneer.nn.ppo import clipped_surrogate, compute_gae, window_row
 from pioneer.nn.recurrent import gru_sequence
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event, classify
@@ -275,21 +274,19 @@ class _Trainer:
         n = stats.pop("n")
         return {k: v / n for k, v in stats.items()}
 
+    def end_update(self) -> list[float]:
+        """Count the update and append its learning-curve row."""
+        self.update += 1
+        return self.record()
+
     def record(self) -> list[float]:
         """Append this update's learning-curve row."""
-        ev = np.asarray(self.win_event)
-
-        def rate(code: int) -> float:
-            return float(np.mean(ev == code)) if ev.size else math.nan
-
+        codes = (Event.SUCCESS, Event.COLLISION, Event.TIMEOUT)
         row = [
             float(self.update),
             float(self.env_steps),
             float(self.episodes),
-            float(np.mean(self.win_return)) if self.win_return else math.nan,
-            rate(Event.SUCCESS),
-            rate(Event.COLLISION),
-            rate(Event.TIMEOUT),
+            *window_row(self.win_return, self.win_event, codes),
             self.wall,
         ]
         self.curve.append(row)
