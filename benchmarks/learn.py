@@ -335,7 +335,7 @@ def bench_finetune_throughput(plan: Plan) -> Result:
     import torch
 
     from pioneer.data import shipped_student
-    from pioneer.learn.finetune import FinetuneConfig, _Trainer
+    from pioneer.learn.finetune_trainer import FinetuneConfig, FinetuneTrainer
     from pioneer.learn.models import load_student
 
     n_updates = 3 if mode(plan) == "quick" else 10
@@ -343,7 +343,9 @@ def bench_finetune_throughput(plan: Plan) -> Result:
     metrics: dict[str, Any] = {}
     for threads in (1, 2):
         torch.set_num_threads(threads)
-        tr = _Trainer(load_student(shipped_student("", "mdn", True)), [["hr-rl"], ["hl-rr"]], cfg)
+        tr = FinetuneTrainer(
+            load_student(shipped_student("", "mdn", True)), [["hr-rl"], ["hl-rr"]], cfg
+        )
         tr.learn(tr.rollout())
         tr.end_update()
         rates, rollout_s, update_s = [], [], []

@@ -13,7 +13,8 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, _Trainer, finetune_student
+from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, finetune_student
+from pioneer.learn.finetune_trainer import FinetuneTrainer
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
 from pioneer.learn.models import (
     StudentConfig,
@@ -109,7 +110,7 @@ def test_inputs_start_each_episode_afresh_and_carry_the_command_run(tmp_path: Pa
 
 
 def test_the_pull_fades_linearly_to_zero(tmp_path: Path) -> None:
-    tr = _Trainer(load_student(_student(tmp_path)), [["hr-rl"]], dataclasses.replace(TINY))
+    tr = FinetuneTrainer(load_student(_student(tmp_path)), [["hr-rl"]], dataclasses.replace(TINY))
     betas = []
     for u in range(TINY.updates + 1):
         tr.env_steps = u * TINY.steps_per_update

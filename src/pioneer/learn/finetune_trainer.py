@@ -1,0 +1,350 @@
+"""The trainer of the students' fine-tuning: its settings, the critic, rollouts over
+:class:`~pioneer.learn.layout_env.LayoutEnvs`, PPO updates and the whole training state
+(the method and its formulas: :mod:`pioneer.learn.finetune`)."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import torch
+from annotated_types import MinLen
+from torch import nn
+
+from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
+from pioneer.config import Config
+from pioneer.errors import ConfigError, expect
+from pioneer.io import atomic_path
+from pioneer.learn.layout_env import LayoutEnvs, privileged_width
+from pioneer.learn.models import Student
+from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
+from pioneer.nn.layers import seeded_linear
+from pioneer.nn.ppo import clipped_surrogate, compute_gae, window_row
+from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
+from pioneer.sim.events import Event
+
+__all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "Critic", "FinetuneConfig", "FinetuneTrainer"]
+
+TRAIN_FORMAT = "pioneer.finetune-train/1"
+CURVE_COLUMNS = (
+    "update",
+    "env_steps",
+    "episodes",
+    "mean_return",
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "kl_coef",
+    "std",
+    "wall_time_s",
+)
+FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
+MAX_HUMANS = 6  # person slots of the critic's privileged view
+
+
+@dataclasses.dataclass(frozen=True)
+class FinetuneConfig(Config):
+    """Settings of a fine-tuning run (module docstring)."""
+
+    total_steps: Count = 6_000_000  # env steps (all copies together)
+    groups: Count = 8  # layouts stepped at once
+    group_size: Count = 8  # copies of each layout
+    rollout: Count = 64  # steps per copy per update
+    layout_period: Count = 4  # [updates] between two draws of every group's layout
+    lr: Positive = 3e-5  # the actor's Adam learning rate (with σ)
+    critic_lr: Positive = 1e-3  # the critic's
+    gamma: UnitInterval = 0.99  # discount per 0.1 s step
+    gae_lambda: UnitInterval = 0.95  # GAE λ
+    clip: Positive = 0.2  # PPO ratio clip
+    epochs: Count = 4  # passes over each rollout
+    minibatches: Count = 4  # per pass
+    max_grad_norm: Positive = 0.5  # gradient clipping (global L2 norm, per network)
+    init_std: Positive = 0.2  # σ_0: exploration noise in standardised action units
+    kl_coef: NonNegative = 1.0  # β_0 of the pull towards the DAgger student
+    kl_fade: NonNegativeInt = 500_000  # [env steps] over which β falls to 0
+    critic_warmup: NonNegativeInt = 10  # [updates] the critic alone learns first
+    critic_hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # its widths
+    reward: CrowdNavRewardConfig = FINETUNE_REWARD
+    seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
+    checkpoint_every: Count = 20  # [updates] between checkpoints
+    window: Count = 200  # finished episodes in the curve's running statistics
+
+    @property
+    def envs(self) -> int:
+        """Copies stepped together: groups × group_size."""
+        return self.groups * self.group_size
+
+    @property
+    def steps_per_update(self) -> int:
+        """Env steps per update."""
+        return self.envs * self.rollout
+
+    @property
+    def updates(self) -> int:
+        """Updates for ``total_steps`` (rounded up)."""
+        return -(-self.total_steps // self.steps_per_update)
+
+
+class Critic(nn.Module):
+    """V(x, s): an MLP of the student's standardised inputs and the privileged features."""
+
+    def __init__(self, n_in: int, hidden: Sequence[int], gen: torch.Generator) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        for width in hidden:
+            layers += [seeded_linear(n_in, width, gen), nn.ReLU()]
+            n_in = width
+        layers.append(seeded_linear(n_in, 1, gen))
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Values ``(N,)``."""
+        out: torch.Tensor = self.net(x).squeeze(-1)
+        return out
+
+
+class FinetuneTrainer:
+    """Everything that changes during fine-tuning (saved whole in the checkpoint)."""
+
+    def __init__(self, start: Student, names: Sequence[Sequence[str]], cfg: FinetuneConfig) -> None:
+        self.cfg, self.names = cfg, [list(n) for n in names]
+        self.start_info: dict[str, Any] = {}  # the starting student's checkpoint info
+        self.actor = start.eval()
+        self.ref = copy.deepcopy(start).eval().requires_grad_(False)
+        gen = torch.Generator().manual_seed(cfg.seed)
+        n_in = start.config.input_dim + privileged_width(MAX_HUMANS)
+        self.critic = Critic(n_in, cfg.critic_hidden, gen)
+        self.log_std = nn.Parameter(torch.full((2,), math.log(cfg.init_std)))
+        actor_params = [*self.actor.parameters(), self.log_std]
+        self.opt = torch.optim.Adam(actor_params, lr=cfg.lr, eps=1e-5)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
+        self.gen = torch.Generator().manual_seed(cfg.seed + 1)
+        self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0xF17E]))
+        self.envs = LayoutEnvs(
+            names,
+            cfg.groups,
+            cfg.group_size,
+            start.config.inputs,
+            cfg.reward,
+            self.rng,
+            cfg.seed,
+            MAX_HUMANS,
+        )
+        self.ep_return = np.zeros(cfg.envs)
+        self.update = self.env_steps = self.episodes = 0
+        self.wall = 0.0
+        self.win_return: list[float] = []
+        self.win_event: list[int] = []
+        self.curve: list[list[float]] = []
+
+    # -------------------------------------------------------------------- acting
+    def _critic_in(self, x: torch.Tensor, priv: torch.Tensor) -> torch.Tensor:
+        a = self.actor
+        return torch.cat([(x - a.obs_mean) / a.obs_std, priv], dim=-1)
+
+    def _logp(self, mean: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        z = (action - mean) / self.actor.act_std
+        std = torch.exp(self.log_std)
+        return (-0.5 * (z / std) ** 2 - self.log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+
+    def kl_coef(self) -> float:
+        """β_t: ``kl_coef`` falling linearly to 0 over the first ``kl_fade`` env steps (a
+        fixed schedule, so a run extended by a larger ``--steps`` repeats its start)."""
+        cfg = self.cfg
+        if cfg.kl_fade <= 0:
+            return 0.0
+        return float(cfg.kl_coef * max(0.0, 1.0 - self.env_steps / cfg.kl_fade))
+
+    def rollout(self) -> dict[str, torch.Tensor]:
+        """``rollout`` steps of every copy under the exploring policy (no gradients)."""
+        cfg, envs = self.cfg, self.envs
+        t_len, b = cfg.rollout, cfg.envs
+        xs, privs, actions, logps = [], [], [], []
+        values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
+        std = torch.exp(self.log_std) * self.actor.act_std
+        with torch.no_grad():
+            for t in range(t_len):
+                x = torch.from_numpy(envs.student_inputs())
+                priv = torch.from_numpy(envs.privileged())
+                mean = self.actor.deterministic_action(x, "mode")
+                action = mean + std * torch.randn(mean.shape, generator=self.gen)
+                values[t] = self.critic(self._critic_in(x, priv)).numpy()
+                r, event = envs.step(action.numpy().astype(np.float64))
+                rewards[t] = r
+                done = event != Event.NONE
+                dones[t] = done
+                self.ep_return += r
+                for i in np.flatnonzero(done):
+                    self._finish(float(self.ep_return[i]), int(event[i]))
+                    self.ep_return[i] = 0.0
+                xs.append(x)
+                privs.append(priv)
+                actions.append(action)
+                logps.append(self._logp(mean, action))
+            x = torch.from_numpy(envs.student_inputs())
+            priv = torch.from_numpy(envs.privileged())
+            last_value = self.critic(self._critic_in(x, priv)).numpy().astype(np.float64)
+            x_all = torch.cat(xs)
+            ref = self.ref.deterministic_action(x_all, "mode")
+        self.env_steps += t_len * b
+        adv, ret = compute_gae(rewards, values, dones, last_value, cfg.gamma, cfg.gae_lambda)
+        return {
+            "x": x_all,
+            "priv": torch.cat(privs),
+            "action": torch.cat(actions),
+            "logp": torch.cat(logps),
+            "ref": ref,
+            "adv": torch.from_numpy(adv.reshape(-1)).to(torch.float32),
+            "ret": torch.from_numpy(ret.reshape(-1)).to(torch.float32),
+        }
+
+    def _finish(self, ret: float, event: int) -> None:
+        self.episodes += 1
+        self.win_return = [*self.win_return, ret][-self.cfg.window :]
+        self.win_event = [*self.win_event, event][-self.cfg.window :]
+
+    # -------------------------------------------------------------------- learning
+    def learn(self, batch: dict[str, torch.Tensor]) -> dict[str, float]:
+        """PPO epochs (only the critic's regression during the warm-up); mean losses."""
+        cfg = self.cfg
+        actor_on = self.update >= cfg.critic_warmup
+        beta = self.kl_coef()
+        adv = batch["adv"]
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        n = adv.shape[0]
+        stats = {"policy_loss": 0.0, "value_loss": 0.0, "pull": 0.0}
+        steps = 0
+        scale = self.actor.act_std * cfg.init_std
+        for _ in range(cfg.epochs):
+            perm = torch.randperm(n, generator=self.gen)
+            for idx in torch.tensor_split(perm, cfg.minibatches):
+                x = batch["x"][idx]
+                value = self.critic(self._critic_in(x, batch["priv"][idx]))
+                vl = 0.5 * ((batch["ret"][idx] - value) ** 2).mean()
+                self.critic_opt.zero_grad(set_to_none=True)
+                vl.backward()
+                nn.utils.clip_grad_norm_(self.critic.parameters(), cfg.max_grad_norm)
+                self.critic_opt.step()
+                stats["value_loss"] += float(vl.detach())
+                steps += 1
+                if not actor_on:
+                    continue
+                mean = self.actor.deterministic_action(x, "mode")
+                logp = self._logp(mean, batch["action"][idx])
+                pg = clipped_surrogate(logp, batch["logp"][idx], adv[idx], cfg.clip)
+                pull = 0.5 * (((mean - batch["ref"][idx]) / scale) ** 2).sum(-1).mean()
+                loss = pg + beta * pull
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(
+                    [*self.actor.parameters(), self.log_std], cfg.max_grad_norm
+                )
+                self.opt.step()
+                stats["policy_loss"] += float(pg.detach())
+                stats["pull"] += float(pull.detach())
+        return {k: v / max(steps, 1) for k, v in stats.items()}
+
+    def end_update(self) -> list[float]:
+        """Count the update, redraw the layouts when due, append the curve's row."""
+        self.update += 1
+        if self.update % self.cfg.layout_period == 0:
+            for g in range(self.cfg.groups):
+                self.envs.redraw(g)
+            self.ep_return[:] = 0.0  # the cut episodes are not counted
+        codes = (Event.SUCCESS, Event.COLLISION, Event.TIMEOUT)
+        row = [
+            float(self.update),
+            float(self.env_steps),
+            float(self.episodes),
+            *window_row(self.win_return, self.win_event, codes),
+            self.kl_coef(),
+            float(torch.exp(self.log_std.detach()).mean()),
+            self.wall,
+        ]
+        self.curve.append(row)
+        return row
+
+    # -------------------------------------------------------------------- checkpoint
+    def settings(self, student_sha256: str) -> dict[str, Any]:
+        """What must match between a checkpoint and a resuming command."""
+        cfg = self.cfg.to_dict()
+        for k in ("total_steps", "checkpoint_every"):
+            cfg.pop(k)
+        return {"finetune": cfg, "student_sha256": student_sha256, "scenarios": self.names}
+
+    def save(self, path: Path, settings: dict[str, Any]) -> None:
+        """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
+        from safetensors.torch import save
+
+        tensors: dict[str, torch.Tensor] = {}
+        for prefix, module in (("actor", self.actor), ("ref", self.ref), ("critic", self.critic)):
+            for k, v in module.state_dict().items():
+                tensors[f"{prefix}/{k}"] = v.detach().clone().contiguous()
+        tensors["log_std"] = self.log_std.detach().clone()
+        osd, cosd = self.opt.state_dict(), self.critic_opt.state_dict()
+        tensors.update(optimizer_tensors(osd, "optim"))
+        tensors.update(optimizer_tensors(cosd, "critic_optim"))
+        for k, a in self.envs.arrays().items():
+            tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(a).copy())
+        tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
+        tensors["curve"] = torch.tensor(self.curve, dtype=torch.float64).reshape(
+            -1, len(CURVE_COLUMNS)
+        )
+        tensors["window/return"] = torch.tensor(self.win_return, dtype=torch.float64)
+        tensors["window/event"] = torch.tensor(self.win_event, dtype=torch.int64)
+        tensors["rng/torch"] = self.gen.get_state()
+        counters: dict[str, float] = {"update": self.update, "env_steps": self.env_steps}
+        counters |= {"episodes": self.episodes, "wall_time_s": self.wall}
+        meta = {
+            "format": TRAIN_FORMAT,
+            "settings": json.dumps(settings),
+            "param_groups": json.dumps(osd["param_groups"]),
+            "critic_param_groups": json.dumps(cosd["param_groups"]),
+            "counters": json.dumps(counters),
+            "rng_numpy": json.dumps(self.rng.bit_generator.state),
+            "envs": json.dumps(self.envs.meta()),
+            "torch": torch.__version__,
+        }
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(save(tensors, metadata=meta))
+
+    def load(self, path: Path, settings: dict[str, Any]) -> None:
+        """Restore the state :meth:`save` wrote (its settings must be ``settings``)."""
+        fix = "point --out at a new folder (the checkpoint is corrupt or of another kind)"
+        meta, t = read_training_state(path, TRAIN_FORMAT, fix)
+        stored = json.loads(meta["settings"])
+        if stored != json.loads(json.dumps(settings)):
+            diff = sorted(k for k in set(stored) | set(settings) if stored.get(k) != settings[k])
+            raise ConfigError(
+                expect(
+                    f"{path}: settings",
+                    "the same settings and input student as this command (only --steps may change)",
+                    diff,
+                    "repeat the original command (see train.json) or use a new --out",
+                )
+            )
+        for prefix, module in (("actor", self.actor), ("ref", self.ref), ("critic", self.critic)):
+            sd = {k[len(prefix) + 1 :]: v for k, v in t.items() if k.startswith(prefix + "/")}
+            module.load_state_dict(sd, strict=True)
+        with torch.no_grad():
+            self.log_std.copy_(t["log_std"])
+        self.opt.load_state_dict(optimizer_state(t, "optim", json.loads(meta["param_groups"])))
+        groups = json.loads(meta["critic_param_groups"])
+        self.critic_opt.load_state_dict(optimizer_state(t, "critic_optim", groups))
+        env = {k[4:]: v.numpy() for k, v in t.items() if k.startswith("env/")}
+        self.envs.restore(env, json.loads(meta["envs"]))
+        self.ep_return = t["train/ep_return"].numpy().copy()
+        self.curve = t["curve"].tolist()
+        self.win_return = t["window/return"].tolist()
+        self.win_event = [int(x) for x in t["window/event"].tolist()]
+        self.gen.set_state(t["rng/torch"])
+        self.rng.bit_generator.state = json.loads(meta["rng_numpy"])
+        c = json.loads(meta["counters"])
+        self.update, self.env_steps = int(c["update"]), int(c["env_steps"])
+        self.episodes, self.wall = int(c["episodes"]), float(c["wall_time_s"])
