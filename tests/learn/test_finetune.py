@@ -138,10 +138,11 @@ def test_a_symmetric_student_stays_mirror_equivariant(tmp_path: Path) -> None:
 
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
     src = _student(tmp_path)
-    whole = finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "a", TINY, progress=False)
-    half = dataclasses.replace(TINY, total_steps=TINY.total_steps // 2)
-    finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "b", half, progress=False)
-    resumed = finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "b", TINY, progress=False)
+    cfg = dataclasses.replace(TINY, replay=0.5)  # "h?-r?": both paper worlds, prioritised
+    whole = finetune_student(src, ["h?-r?"], tmp_path / "a", cfg, progress=False)
+    half = dataclasses.replace(cfg, total_steps=cfg.total_steps // 2)
+    finetune_student(src, ["h?-r?"], tmp_path / "b", half, progress=False)
+    resumed = finetune_student(src, ["h?-r?"], tmp_path / "b", cfg, progress=False)
     assert resumed["resumed_from_update"] == 2 and resumed["updates"] == whole["updates"] == 4
     a = load_file(tmp_path / "a" / "student.safetensors")
     b = load_file(tmp_path / "b" / "student.safetensors")
@@ -150,7 +151,7 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
     assert [r.rsplit(",", 1)[0] for r in curves[0]] == [r.rsplit(",", 1)[0] for r in curves[1]]
     with pytest.raises(Exception, match="settings"):
         finetune_student(
-            src, ["hr-rl"], tmp_path / "b", dataclasses.replace(TINY, lr=1e-3), progress=False
+            src, ["h?-r?"], tmp_path / "b", dataclasses.replace(cfg, lr=1e-3), progress=False
         )
 
 
@@ -183,3 +184,19 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     assert load_student(out / "student.safetensors").config == load_student(src).config
     info = read_checkpoint_meta(out / "student.safetensors")["info"]
     assert info["dagger"] == {"seed": 7} and info["finetune"]["updates"] == 2  # both records
+
+
+def test_prioritised_layouts_are_drawn_by_their_failure_rate(tmp_path: Path) -> None:
+    model = load_student(_student(tmp_path))
+    pool = [["hr-rl", "hl-rr"]]
+
+    def draws(replay: float, failure: dict[str, float]) -> float:
+        rng = np.random.default_rng(0)
+        envs = LayoutEnvs(pool, 1, 1, model.config.inputs, FINETUNE_REWARD, rng, 0, 6, replay)
+        envs.failure = failure
+        return float(np.mean([envs._draw(pool[0]) == 0 for _ in range(2000)]))
+
+    assert draws(0.0, {"hr-rl": 1.0, "hl-rr": 0.0}) == pytest.approx(0.5, abs=0.05)
+    # replay 0.5: ½ · ½ uniform + ½ · (1 / 1.001) by failure ≈ 0.75 for the failing layout
+    assert draws(0.5, {"hr-rl": 1.0, "hl-rr": 0.0}) == pytest.approx(0.75, abs=0.05)
+    assert draws(1.0, {}) == pytest.approx(0.5, abs=0.05)  # unseen layouts weigh alike

@@ -69,6 +69,9 @@ class FinetuneConfig(Config):
     kl_coef: NonNegative = 1.0  # β_0 of the pull towards the DAgger student
     kl_fade: NonNegativeInt = 500_000  # [env steps] over which β falls to 0
     critic_warmup: NonNegativeInt = 10  # [updates] the critic alone learns first
+    # share of the layout draws made in proportion to each layout's running failure rate
+    # (prioritised layouts; 0: uniform)
+    replay: UnitInterval = 0.0
     critic_hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # its widths
     reward: CrowdNavRewardConfig = FINETUNE_REWARD
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
@@ -135,6 +138,7 @@ class FinetuneTrainer:
             self.rng,
             cfg.seed,
             MAX_HUMANS,
+            cfg.replay,
         )
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0

@@ -120,11 +120,15 @@ class LayoutEnvs:
         rng: np.random.Generator,
         seed: int,
         max_humans: int,
+        replay: float = 0.0,
     ) -> None:
         self.names = [list(n) for n in names]
         self.size, self.inputs, self.reward = group_size, inputs, reward
         self.rng, self.seed, self.max_humans = rng, seed, max_humans
         self.episode_count = 0  # episodes started: the k of finetune_seed
+        # prioritised layouts: each layout's running failure rate (1 until it is first seen)
+        self.replay = replay
+        self.failure: dict[str, float] = {}
         self.groups: list[_Group] = []
         for _ in range(groups):
             self.groups.append(self._new_group())
@@ -150,11 +154,20 @@ class LayoutEnvs:
 
     def _new_group(self) -> _Group:
         pool = self.names[int(self.rng.integers(len(self.names)))]
-        name = pool[int(self.rng.integers(len(pool)))]
+        name = pool[self._draw(pool)]
         sc = get_scenario(name)
         state = State.concat([self._episode(sc) for _ in range(self.size)])
         obs_rng = np.random.default_rng(finetune_seed(self.seed, self.episode_count, "lidar"))
         return _Group(name, state, obs_rng)
+
+    def _draw(self, pool: list[str]) -> int:
+        """A layout of ``pool``: uniformly, or with probability ``replay`` in proportion to its
+        running failure rate (prioritised levels: Jiang et al., ICML 2021)."""
+        if self.replay <= 0.0 or len(pool) == 1:
+            return int(self.rng.integers(len(pool)))
+        w = np.array([self.failure.get(n, 1.0) for n in pool]) + 1e-3
+        p = (1.0 - self.replay) / len(pool) + self.replay * w / w.sum()
+        return int(self.rng.choice(len(pool), p=p / p.sum()))
 
     def redraw(self, g: int) -> None:
         """Group ``g`` restarts every copy in a newly drawn layout."""
@@ -195,6 +208,9 @@ class LayoutEnvs:
             rewards[sl] = crowdnav_reward(grp.world, grp.state, new, event, self.reward)
             events[sl] = event
             done = event != Event.NONE
+            for i in np.flatnonzero(done):  # the layout's failure rate, a running mean
+                failed = float(event[i] != Event.SUCCESS)
+                self.failure[grp.name] = 0.9 * self.failure.get(grp.name, failed) + 0.1 * failed
             for i in np.flatnonzero(done):
                 new.put(int(i), self._episode(grp.scenario))
             grp.state = new
@@ -219,6 +235,7 @@ class LayoutEnvs:
         return {
             "layouts": [g.name for g in self.groups],
             "episode_count": self.episode_count,
+            "failure": self.failure,
             "lidar_rngs": [g.obs_rng.bit_generator.state for g in self.groups],
         }
 
@@ -227,6 +244,7 @@ class LayoutEnvs:
         self.obs, self.prev_obs = arrays["obs"].copy(), arrays["prev_obs"].copy()
         self.prev_cmd = arrays["prev_cmd"].copy()
         self.episode_count = int(meta["episode_count"])
+        self.failure = {str(k): float(v) for k, v in meta.get("failure", {}).items()}
         for g, name in enumerate(meta["layouts"]):
             state = State(**{k: arrays[f"group{g}/{k}"].copy() for k in _FIELDS})
             rng = np.random.default_rng()
