@@ -133,7 +133,7 @@ class Finetune:
     finetune: tyro.conf.OmitArgPrefixes[FinetuneConfig] = FinetuneConfig()
     """fine-tuning settings"""
     threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")
-    """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.2× faster)"""
+    """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.3× faster)"""
     resume: Flag = False
     """require a checkpoint in --out (default: resume if there is one)"""
 
