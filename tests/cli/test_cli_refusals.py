@@ -39,6 +39,7 @@ INVALID: dict[str, tuple[str, str]] = {
     "sample-layouts": ("sample-layouts --prefix ../../x --n 1 --out OUT", "--prefix"),
     "calibrate": ("calibrate --driver nope --episodes 1 --out OUT", "nope"),
     "distill": ("distill --scenario static --reward IN/random.npz --out OUT", "random.npz"),
+    "finetune": ("finetune --scenario hr-rl --student IN/random.npz --out OUT", "random.npz"),
     "export": (f"export --model {MLP} --action-mode mean --out OUT", "--action-mode"),
     "replay": ("replay --bag IN/missing.bag --model IN/w28.onnx --out OUT --goal 1 0", "bag"),
     "train crowdnav++": ("train crowdnav++ --scenario nope --out OUT", "nope"),
