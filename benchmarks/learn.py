@@ -271,13 +271,15 @@ def bench_crowdnav_train_throughput(plan: Plan) -> Result:
     """Environment steps/s of the CrowdNav++ PPO trainer (rollout + update, HR-RL, one torch
     thread: ``pioneer train crowdnav++``'s default), per update after a warm-up one, with 16
     (the original's), 32 and 64 environments; with 64 also on two torch threads
-    (``--threads 2``), where an environment step's time goes (:func:`_crowdnav_phases`), and
-    the rate times the host's GEMM (256³ float32), the figure that travels between hosts."""
+    (``--threads 2``) and paid without the intrusion term (the ``crowdnav++-il-teacher`` row's
+    PPO phase, ``--reward no-intrusion``), where an environment step's time goes
+    (:func:`_crowdnav_phases`), and the rate times the host's GEMM (256³ float32), the figure
+    that travels between hosts."""
     import torch
 
     from pioneer.baselines.crowdnav.network import CrowdNavConfig
     from pioneer.baselines.crowdnav.ppo import PPOConfig, _Trainer
-    from pioneer.reward.crowdnav import CrowdNavRewardConfig
+    from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 
     metrics: dict[str, Any] = {}
     n_updates = 3 if mode(plan) == "quick" else 8
@@ -291,12 +293,12 @@ def bench_crowdnav_train_throughput(plan: Plan) -> Result:
             rates.append(tr.ppo.steps_per_update / (time.perf_counter() - t0))
         return rates
 
-    def trainer(n_envs: int) -> Any:
+    def trainer(n_envs: int, reward: CrowdNavRewardConfig | None = None) -> Any:
         return _Trainer(
             get_scenario(SCENARIO),
             PPOConfig(n_envs=n_envs, seed=SEED % 1000),
             CrowdNavConfig(max_humans=3),
-            CrowdNavRewardConfig(),
+            reward or CrowdNavRewardConfig(),
         )
 
     torch.set_num_threads(2)
@@ -307,6 +309,10 @@ def bench_crowdnav_train_throughput(plan: Plan) -> Result:
         tr = trainer(n_envs)
         rates = rates_of(tr)
         metrics[f"steps_per_s_{n_envs}_envs"] = metric(rates, "steps/s", target)
+    # the crowdnav++-il-teacher row's PPO phase: 64 environments paid without the intrusion term
+    metrics["steps_per_s_64_envs_no_intrusion"] = metric(
+        rates_of(trainer(64, NO_INTRUSION)), "steps/s", (">=", 10_000.0)
+    )
     gemm = time_cases({"gemm": sgemm_256_case()}, plan.batch_repeats, warmup=3)["gemm"]
     metrics["steps_per_s_64_envs_x_gemm_ms"] = metric(
         [float(np.median(rates)) * float(np.median(gemm)) * 1e3], "steps/s·ms", (">=", 4500.0)

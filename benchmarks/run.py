@@ -41,6 +41,8 @@ Benchmarks and targets (docs/performance.md explains them):
 - ``crowdnav_decision``   CrowdNav++ policy.act, shipped weights (NumPy; torch  <= 1 ms
                           beside it, 1 thread)
 - ``crowdnav_train_throughput``  PPO trainer env steps/s, 16 and 32 envs       >= 2,000 /s (32)
+                          64 envs, also without the intrusion term          >= 10,000 /s (64)
+                          (``--reward no-intrusion``: crowdnav++-il-teacher)
 - ``finetune_throughput`` students' PPO fine-tuning env steps/s, 64 copies  >= 20,000 /s (2 threads)
 - ``vector_env``          64 envs: native vector env vs ``SyncVectorEnv``      native >= 5x sync
 """

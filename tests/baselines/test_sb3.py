@@ -31,6 +31,7 @@ from pioneer.baselines.sb3 import (
 from pioneer.control.registry import build_policy
 from pioneer.envs.env import NavEnv
 from pioneer.registration import register_envs
+from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer_testutils import (
     assert_house_message,
     file_tree,
@@ -253,6 +254,7 @@ def test_the_checkpoint_holds_no_pickle_and_round_trips_the_training_state(resum
         (["--envs", "2"], "--envs"),
         (["--seed", "1"], "--seed"),
         (["--scenario", "hr-rl"], "--scenario"),
+        (["--reward", "no-intrusion"], "--reward"),
     ],
 )
 def test_other_settings_on_an_existing_run_are_refused(resumed, extra, flag):
@@ -333,3 +335,18 @@ def test_the_shipped_policy_loads_without_weights(scenario):
             break
     assert sb3_files(scenario, {}) == {"weights": shipped_sb3_weights(scenario)}
     assert sb3_files(scenario, {"weights": "mine.safetensors"}) == {}
+
+
+def test_the_reward_without_intrusion_reaches_the_environments(tmp_path):
+    """``--reward no-intrusion``: every training environment prices steps with
+    :data:`~pioneer.reward.crowdnav.NO_INTRUSION`, and the run's summary names it."""
+    venv = _build(*env_id_for("hl-rr"), 2, 0)[1]
+    assert all(e.unwrapped.reward.config == CrowdNavRewardConfig() for e in venv.envs)
+    env_id, kwargs = env_id_for("hl-rr")
+    venv = _build(env_id, {**kwargs, "reward": NO_INTRUSION}, 2, 0)[1]
+    assert all(e.unwrapped.reward.config is NO_INTRUSION for e in venv.envs)
+    out = tmp_path / "run"
+    argv = ["--scenario", "hl-rr", "--steps", "64", "--reward", "no-intrusion"]
+    res = run_cli("train", "sb3-ppo", *argv, "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert json.loads((out / "train.json").read_text())["reward"] == "no-intrusion"

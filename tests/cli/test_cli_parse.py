@@ -13,6 +13,7 @@ from pioneer.baselines.crowdnav.ppo import PPOConfig
 from pioneer.cli import main
 from pioneer.learn.dagger import DaggerConfig
 from pioneer.learn.models import StudentConfig
+from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import DensityConfig
 from pioneer_testutils import assert_house_message, run_cli
@@ -93,14 +94,20 @@ def test_train_defaults_are_the_ppo_and_warm_start_configs(monkeypatch, tmp_path
 
     seen = {}
 
-    def fake_train(scenario, out, ppo, warm, resume, command, torch_threads):
-        seen.update(ppo=ppo, warm=warm, resume=resume, threads=torch_threads)
+    def fake_train(scenario, out, ppo, reward, warm, resume, command, torch_threads):
+        seen.update(ppo=ppo, reward=reward, warm=warm, resume=resume, threads=torch_threads)
         raise RuntimeError("stop here")
 
     monkeypatch.setattr(learning, "train_crowdnav", fake_train)
     with pytest.raises(RuntimeError, match="stop here"):
         main(["train", "crowdnav++", "--out", str(tmp_path / "t")])
-    assert seen == {"ppo": PPOConfig(), "warm": WarmStartConfig(), "resume": None, "threads": 1}
+    assert seen == {
+        "ppo": PPOConfig(),
+        "reward": CrowdNavRewardConfig(),  # the CrowdNav++ reward, the trainer's default
+        "warm": WarmStartConfig(),
+        "resume": None,
+        "threads": 1,
+    }
 
 
 def test_reward_fit_defaults_are_the_recipe_and_density_config():

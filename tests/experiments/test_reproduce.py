@@ -12,6 +12,7 @@ from pioneer.data import STUDENT_SEEDS
 from pioneer.eval.harness import read_records
 from pioneer.eval.metrics import RANGES
 from pioneer.experiments.reproduce import (
+    ARRIVING,
     BASELINES,
     CLASSIC,
     PAPER_STUDENT,
@@ -41,7 +42,7 @@ def test_every_row_is_evaluated_once(smoke: Path) -> None:
     recs = read_records(smoke / "eval" / "episodes.jsonl")
     rows = {(r["scenario"], r["policy"]) for r in recs}
     student_rows = [p.row for p in student_specs()]
-    rows_i = (*PAPER_TEACHERS, *TEACHERS, *BASELINES, *CLASSIC, *student_rows, SHIELD)
+    rows_i = (*PAPER_TEACHERS, *TEACHERS, *BASELINES, *ARRIVING, *CLASSIC, *student_rows, SHIELD)
     expected = {(sc, p) for sc in SCENARIOS for p in rows_i}
     assert rows == expected
     assert len(recs) == len(expected)  # 1 seed × 1 trial each

@@ -5,12 +5,17 @@ configurations that make every branch count."""
 
 from __future__ import annotations
 
+import typing
+
 import numpy as np
 import pytest
 
 from pioneer.reward.crowdnav import (
+    NO_INTRUSION,
+    REWARDS,
     TERMS,
     CrowdNavRewardConfig,
+    RewardName,
     crowdnav_reward,
     crowdnav_reward_terms,
 )
@@ -109,3 +114,32 @@ def test_no_humans_and_a_single_copy():
     for name in TERMS:
         np.testing.assert_array_equal(got[name], want[name], err_msg=name)
     np.testing.assert_array_equal(total, want_total)
+
+
+def test_the_named_rewards_and_no_intrusion_against_hand_computed_values():
+    """``pioneer train crowdnav++ --reward``'s choices: the original and the same without its
+    intrusion term. A robot 0.1 m closer to its goal, 0.5 m from a person at rest (within
+    r_r + r_h = 0.9 m of all 5 predicted positions): progress 3 × 0.1 = +0.3; intrusion the
+    least of −20/2^(k+1) × Δt/T, k = 1: −5 × 0.1/0.25 = −2.0 — charged by the original only."""
+    assert REWARDS["crowdnav"] == CrowdNavRewardConfig()
+    assert REWARDS["no-intrusion"] is NO_INTRUSION
+    assert set(REWARDS) == set(typing.get_args(RewardName))
+    sc = get_scenario("hr-rl")
+    world = sc.world()
+    prev = sample_state(sc, np.random.default_rng(0))
+    to_goal = prev.goal[0] - prev.robot[0, :2]
+    new = prev.copy()
+    new.robot[0, :2] += 0.1 * to_goal / np.linalg.norm(to_goal)
+    new.command[0] = (0.5, 0.0)  # no turn: no spin
+    new.gap[0] = np.inf  # no discomfort
+    new.h_pos[0] += 50.0  # everybody far, but one person at rest 0.5 m from the robot
+    new.h_pos[0, 0] = new.robot[0, :2] + [0.5, 0.0]
+    new.h_vel[0] = 0.0
+    new.humans_present[0, 0] = True
+    event = np.array([Event.NONE], dtype=np.int8)
+    for name, intrusion in (("crowdnav", -2.0), ("no-intrusion", 0.0)):
+        terms, total = crowdnav_reward_terms(world, prev, new, event, REWARDS[name])
+        assert terms["progress"][0] == pytest.approx(0.3)
+        assert terms["intrusion"][0] == pytest.approx(intrusion)
+        assert terms["discomfort"][0] == terms["spin"][0] == 0.0
+        assert total[0] == pytest.approx(0.3 + intrusion)

@@ -3,8 +3,9 @@
 ``train_sb3_ppo`` makes ``pioneer/ElevatorHRRL-v1`` (or ``…HLRR-v1``; other scenarios through the
 ``scenario`` keyword) with ``stable_baselines3.common.env_util.make_vec_env``, trains SB3's
 ``PPO("MlpPolicy")`` with SB3's default hyperparameters on the environment's own reward (the
-29-D LiDAR observation, absolute (v, ω) actions), and writes (each file atomically, except the
-appended curve)
+29-D LiDAR observation, absolute (v, ω) actions; ``reward="no-intrusion"`` passes the
+CrowdNav++ reward without its intrusion term to the environments instead), and writes (each
+file atomically, except the appended curve)
 
 - ``policy.safetensors``: the policy network's tensors, with the SB3 version, the network
   architecture, the spaces and the training settings as JSON metadata. SB3's own ``.zip``
@@ -24,7 +25,7 @@ appended curve)
 Resuming: running the same command on an ``--out`` that holds a run continues from its
 checkpoint (``--resume`` insists on one) up to ``--steps`` in all; ``curve.csv`` keeps its
 rows and is appended to. A larger ``--steps`` extends a finished run; any other setting
-(scenario, environments, seed) must match the checkpoint's, otherwise the command is refused
+(scenario, environments, seed, reward) must match the checkpoint's, otherwise the command is refused
 (use a new ``--out``), as is a folder written before runs were resumable (a
 ``policy.safetensors`` without a checkpoint). Nothing is deleted. Ctrl-C or SIGTERM during an
 update lets it finish and writes the checkpoint; during a rollout it stops at once (the
@@ -66,6 +67,7 @@ from pioneer.io import (
     write_text_atomic,
 )
 from pioneer.registration import ENV_IDS, register_envs
+from pioneer.reward.crowdnav import REWARDS, RewardName
 
 __all__ = [
     "CHECKPOINT",
@@ -86,7 +88,14 @@ CURVE_COLUMNS = ("rollout", *PPO_CURVE_COLUMNS[1:])
 WINDOW = 100  # finished episodes in the curve's running statistics
 _FALLBACK_ID = "pioneer/ElevatorHRRL-v1"  # any registered id; ``scenario=`` picks the world
 # The settings a checkpoint and a resuming command must share, with their flags.
-_FLAGS = {"scenario": "--scenario", "env_id": "env_id", "n_envs": "--envs", "seed": "--seed"}
+_FLAGS = {
+    "scenario": "--scenario",
+    "env_id": "env_id",
+    "n_envs": "--envs",
+    "seed": "--seed",
+    "reward": "--reward",
+}
+_UNSTORED = {"reward": "crowdnav"}  # a setting absent from the settings when it has this value
 
 
 def env_id_for(scenario: str) -> tuple[str, dict[str, Any]]:
@@ -210,9 +219,12 @@ def train_sb3_ppo(
     resume: bool | None = None,
     progress: bool = True,
     command: str = "",
+    reward: RewardName = "crowdnav",
 ) -> dict[str, Any]:
     """Train (or resume) SB3's PPO (its defaults) on ``scenario``'s Gymnasium environment up
     to ``steps`` environment steps in all; returns the summary written to ``train.json``.
+    ``reward``: the environment's own, the CrowdNav++ reward (``"crowdnav"``), or another of
+    :data:`pioneer.reward.crowdnav.REWARDS` passed to the environment.
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
     ``True`` requires it, ``False`` refuses an ``out`` that holds one (nothing is deleted).
@@ -229,13 +241,16 @@ def train_sb3_ppo(
     register_envs()
     env_id, kwargs = env_id_for(scenario)
     gym.spec(env_id)  # an unknown id fails here, before any work
-    settings = {
+    settings: dict[str, Any] = {
         "scenario": scenario,
         "env_id": env_id,
         "steps": steps,
         "n_envs": n_envs,
         "seed": seed,
     }
+    if reward != _UNSTORED["reward"]:  # absent for the environment's own: older runs resume
+        kwargs = {**kwargs, "reward": REWARDS[reward]}
+        settings["reward"] = reward
     _check_out(out, resume, settings)
     torch.set_num_threads(1)
     model, venv = _build(env_id, kwargs, n_envs, seed)
@@ -283,12 +298,12 @@ def _check_out(out: Path, resume: bool | None, settings: Mapping[str, Any]) -> b
     stored = json.loads(_read_state(ckpt, tensors=False)[0]["settings"])
     diff = [k for k in _FLAGS if stored.get(k) != settings.get(k)]
     if diff:
-        was = {_FLAGS[k]: stored.get(k) for k in diff}
+        was = {_FLAGS[k]: stored.get(k, _UNSTORED.get(k)) for k in diff}
         raise ConfigError(
             expect(
                 f"{ckpt}: settings",
                 f"the checkpoint's {was} (only --steps may change)",
-                {_FLAGS[k]: settings[k] for k in diff},
+                {_FLAGS[k]: settings.get(k, _UNSTORED.get(k)) for k in diff},
                 "repeat the original command's settings or use a new --out",
             )
         )
@@ -497,6 +512,7 @@ def _summary(
     return {
         "scenario": settings["scenario"],
         "env_id": settings["env_id"],
+        "reward": settings.get("reward", _UNSTORED["reward"]),
         "command": command,
         "env_steps": int(model.num_timesteps),
         "updates": len(curve.rows),

@@ -41,6 +41,7 @@ from pioneer.laser import UnseenRule as LaserUnseenRule
 from pioneer.learn.dagger import DaggerConfig, run_dagger
 from pioneer.learn.finetune import FinetuneConfig, finetune_student
 from pioneer.learn.models import MDN_ONLY, StudentConfig
+from pioneer.reward.crowdnav import REWARDS, RewardName
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 if TYPE_CHECKING:
@@ -167,6 +168,9 @@ class TrainCrowdNav:
     """PPO settings"""
     warm: tyro.conf.OmitArgPrefixes[WarmStartConfig] = WarmStartConfig()
     """imitation warm start and critic warm-up (all off by default: pure PPO)"""
+    reward: RewardName = "crowdnav"
+    """crowdnav: the CrowdNav++ reward; no-intrusion: the same without its intrusion term
+    (docs/baselines.md); a resume must use the run's"""
     threads: Annotated[int, Ge(1)] = default(train_crowdnav, "torch_threads")
     """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.2× faster)"""
     resume: Flag = False
@@ -178,6 +182,7 @@ class TrainCrowdNav:
             self.scenario,
             self.out,
             self.ppo,
+            reward=REWARDS[self.reward],
             warm=self.warm,
             resume=True if self.resume else None,
             command=command_line(),
@@ -191,8 +196,8 @@ class TrainCrowdNav:
 @dataclasses.dataclass(frozen=True)
 class TrainSb3:
     """Stable-Baselines3 PPO (its defaults, MlpPolicy) on the Gymnasium environment with the
-    environment's own reward; writes policy.safetensors and checkpoint.safetensors (no pickle),
-    curve.csv/png, train.json (resumes an existing --out). Needs the sb3 extra."""
+    environment's own reward (or --reward); writes policy.safetensors and checkpoint.safetensors
+    (no pickle), curve.csv/png, train.json (resumes an existing --out). Needs the sb3 extra."""
 
     out: OutDir
     """output folder (checkpoint, policy, curve; resumes if it holds a run)"""
@@ -204,6 +209,9 @@ class TrainSb3:
     """environments (SB3's make_vec_env)"""
     seed: Seed = default(train_sb3_ppo, "seed")
     """seeds SB3 and the environments"""
+    reward: RewardName = default(train_sb3_ppo, "reward")
+    """crowdnav: the environment's own (the CrowdNav++ reward); no-intrusion: the same without
+    its intrusion term; a resume must use the run's"""
     resume: Flag = False
     """require a checkpoint in --out (default: resume if there is one)"""
 
@@ -217,6 +225,7 @@ class TrainSb3:
             seed=self.seed,
             resume=True if self.resume else None,
             command=command_line(),
+            reward=self.reward,
         )
         print(to_json({"out": self.out, "env_steps": summary["env_steps"]}))
         print(to_json({"final": summary["final"], "wall_time_s": summary["wall_time_s"]}))

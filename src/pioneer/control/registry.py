@@ -225,6 +225,16 @@ _BUILTINS = (
         name="crowdnav++-il",
     ),
     _builtin(
+        "crowdnav++-il-teacher",
+        "pioneer.baselines.crowdnav.policy:make_crowdnav_policy",
+        "CrowdNav++ warm-started by imitation of our teacher, then PPO on the CrowdNav++ reward "
+        "without its intrusion term",
+        **_CROWDNAV_PARTS,
+        extra="learn",
+        variant="il-teacher",
+        name="crowdnav++-il-teacher",
+    ),
+    _builtin(
         "sb3-ppo",
         "pioneer.baselines.sb3:make_sb3_policy",
         "Stable-Baselines3 PPO on the LiDAR observation, SB3's defaults (beyond the paper)",

@@ -110,13 +110,17 @@ def shipped_student(
     return p
 
 
-CROWDNAV_VARIANTS = {"ppo": "crowdnav", "il": "crowdnav-il"}  # variant → file-name prefix
+# variant → file-name prefix: pure PPO (the `crowdnav++` row), imitation of sfm + PPO (compact
+# world, `crowdnav++-il`), imitation of the teacher + PPO without the intrusion term
+# (`crowdnav++-il-teacher`)
+CROWDNAV_VARIANTS = {"ppo": "crowdnav", "il": "crowdnav-il", "il-teacher": "crowdnav-il-teacher"}
 
 
 def shipped_crowdnav_weights(scenario: str, variant: str = "ppo") -> Path:
     """Path of the shipped CrowdNav++ weights for ``scenario``: ``variant`` "ppo" (pure PPO, the
-    original's recipe: ``baselines/crowdnav-NAME``) or "il" (imitation warm start + PPO:
-    ``baselines/crowdnav-il-NAME``)."""
+    original's recipe: ``baselines/crowdnav-NAME``), "il" (imitation of sfm + PPO:
+    ``baselines/crowdnav-il-NAME``) or "il-teacher" (imitation of the teacher + PPO without the
+    intrusion term: ``baselines/crowdnav-il-teacher-NAME``)."""
     if variant not in CROWDNAV_VARIANTS:
         raise DataError(
             expect("CrowdNav++ variant", f"one of {sorted(CROWDNAV_VARIANTS)}", variant, "pick one")

@@ -71,6 +71,9 @@ STUDENTS = ("student-mdn", "student-mlp")  # paper Table III, the shipped DAgger
 PAPER_STUDENT = "student-mdn-paper"  # the paper's DAgger recipe, as a measured row
 SHIELD = "student-shield"  # beyond the paper: the MDN handing over to the teacher when unsure
 BASELINES = ("cvar-bf", "crowdnav++")  # paper Table I (CrowdNav++: pure PPO, its own recipe)
+# beyond the paper, in Table I: CrowdNav++ as its authors' family would train it here (an
+# imitation warm start, then PPO on the CrowdNav++ reward without its intrusion term)
+ARRIVING = ("crowdnav++-il-teacher",)
 # beyond the paper, in Table I: classic references and Stable-Baselines3's PPO with its
 # defaults on the environment's own reward
 CLASSIC = ("dwa", "sfm", "goal", "sb3-ppo")
@@ -153,7 +156,8 @@ def _reproduce(
     fit_models(out, SCENARIOS)
     reward_tpl = str(out / "models" / "{scenario}.reward.npz")
     policies = [PolicySpec.make(name, reward=reward_tpl) for name in (*PAPER_TEACHERS, *TEACHERS)]
-    extra = [PolicySpec.make(name) for name in (*BASELINES, *CLASSIC)] + list(extra_policies)
+    extra = [PolicySpec.make(name) for name in (*BASELINES, *ARRIVING, *CLASSIC)]
+    extra += list(extra_policies)
     students = student_specs()
     students.append(PolicySpec.make(SHIELD, reward=reward_tpl))
     policies += extra + students

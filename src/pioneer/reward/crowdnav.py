@@ -24,6 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Literal
 
 import numpy as np
 from numba import njit
@@ -36,9 +39,11 @@ from pioneer.sim.world import State, World
 
 __all__ = [
     "NO_INTRUSION",
+    "REWARDS",
     "TERMS",
     "CrowdNavReward",
     "CrowdNavRewardConfig",
+    "RewardName",
     "crowdnav_reward",
     "crowdnav_reward_terms",
 ]
@@ -68,6 +73,13 @@ class CrowdNavRewardConfig(Config):
 # waiting beside the door (with it, waiting costs ≈ −4 an episode and the teacher's own
 # successes −14.4 in HR-RL: docs/baselines.md). The students' fine-tuning is paid with it.
 NO_INTRUSION = CrowdNavRewardConfig(intrusion=0.0)
+
+# The rewards a CrowdNav++ training run can be paid with, by name (``pioneer train crowdnav++
+# --reward``): the original's, and the same without its intrusion term.
+RewardName = Literal["crowdnav", "no-intrusion"]
+REWARDS: Mapping[RewardName, CrowdNavRewardConfig] = MappingProxyType(
+    {"crowdnav": CrowdNavRewardConfig(), "no-intrusion": NO_INTRUSION}
+)
 
 _COLLISION, _SUCCESS = int(Event.COLLISION), int(Event.SUCCESS)  # plain ints: no enum lookup
 # The rows of the terms the kernel fills, in the order of ``crowdnav_reward_terms``'s dict.

@@ -39,8 +39,8 @@ from pioneer.data import shipped_crowdnav_weights as shipped_weights
 from pioneer.errors import ConfigError, DataError
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import PolicySpec, evaluate
+from pioneer.reward.crowdnav import NO_INTRUSION, crowdnav_reward
 from pioneer.reward.crowdnav import CrowdNavRewardConfig as RewardConfig
-from pioneer.reward.crowdnav import crowdnav_reward
 from pioneer.sim.events import classify
 from pioneer.sim.humans import GONE
 from pioneer.sim.robot import RobotConfig
@@ -324,7 +324,13 @@ def test_shipped_weights_in_spawned_harness(tmp_path):
             shipped_weights(f"{sc}-compact")
         with pytest.raises(DataError, match=f"crowdnav-il-{sc}"):
             shipped_weights(sc, "il")
+        # the paper world's warm start imitates the teacher and is paid without intrusion
+        arrive = read_crowdnav_meta(shipped_weights(sc, "il-teacher"))["info"]
+        assert arrive["scenario"] == sc and arrive["warm_start"]["expert"] == "teacher"
+        assert arrive["reward"] == NO_INTRUSION.to_dict()
+        assert arrive["ppo"]["seed"] == 0
     assert build_policy("crowdnav++-il", "hl-rr-compact").name == "crowdnav++-il"
+    assert build_policy("crowdnav++-il-teacher", "hr-rl").name == "crowdnav++-il-teacher"
     with pytest.raises(DataError, match="variant"):
         shipped_weights("hr-rl", "bogus")
     recs = evaluate(
@@ -413,6 +419,7 @@ def test_a_signal_stops_training_between_updates_and_the_rerun_matches(
         (["--resume"], "--resume"),
         (["--lr", "-1"], "--lr"),
         (["--threads", "0"], "--threads"),
+        (["--reward", "no-time-cost"], "--reward"),
     ],
 )
 def test_train_cli_bad_input(tmp_path, capsys, extra, needle):
@@ -428,14 +435,21 @@ def test_train_cli_bad_input(tmp_path, capsys, extra, needle):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("pioneer: error:")
     assert needle in err[0]
+    assert not (tmp_path / "x").exists()  # refused before anything is written
 
 
-def test_train_cli_refuses_other_settings_on_resume(tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("other", "needle"),
+    [(["--lr", "1e-3"], "ppo.lr"), (["--reward", "no-intrusion"], "reward.intrusion")],
+)
+def test_train_cli_refuses_other_settings_on_resume(tmp_path, capsys, other, needle):
     assert _train(tmp_path, 60) == 0
     capsys.readouterr()
-    assert _train(tmp_path, 120, "--lr", "1e-3") == 2
+    before = file_tree(tmp_path)
+    assert _train(tmp_path, 120, *other) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "ppo.lr" in err[0]
+    assert len(err) == 1 and needle in err[0]
+    assert file_tree(tmp_path) == before
 
 
 # ------------------------------------------------------------------------- imitation warm start
@@ -500,13 +514,25 @@ def test_bc_reduces_imitation_loss(teacher_episode):
 
 
 def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monkeypatch):
+    """The ``crowdnav++-il-teacher`` recipe in small (the teacher's demonstrations, a DAgger
+    round, the critic warm-up, PPO paid without the intrusion term): resumed after any update
+    or after the imitation phase, it ends as the uninterrupted run, bit for bit."""
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
-    warm = ["--bc-episodes", "2", "--bc-epochs", "2", "--critic-warmup", "1"]
+    warm = [
+        "--bc-expert", "teacher", "--bc-episodes", "2", "--bc-epochs", "2", "--dagger-rounds",
+        "1", "--dagger-episodes", "1", "--critic-warmup", "1", "--reward", "no-intrusion",
+        "--ppo-std", "0.1", "--value-coef", "0.01",
+    ]  # fmt: skip
     assert _train(b, 120, *warm) == 0  # uninterrupted: imitation, 1 critic-only + 1 PPO update
     info = json.loads((b / "train.json").read_text())
-    assert info["imitation"]["data"]["episodes"] == 2 and info["updates"] == 2
+    assert info["imitation"]["data"]["episodes"] == 3 and info["updates"] == 2
+    assert info["reward"] == NO_INTRUSION.to_dict()
+    assert info["warm_start"]["expert"] == "teacher"
     assert load_crowdnav(b / "bc_policy.safetensors").config.max_humans == 3
     assert _train(a, 60, *warm) == 0  # stopped after the critic warm-up update
+    # PPO starts from σ = --ppo-std (the critic warm-up leaves the actor as it is)
+    std = torch.exp(load_crowdnav(a / "policy.safetensors").log_std.detach())
+    torch.testing.assert_close(std, torch.full((2,), 0.1), rtol=1e-6, atol=0.0)
 
     def boom(*args, **kwargs):
         raise AssertionError("the imitation phase was redone")
@@ -525,7 +551,9 @@ def test_train_cli_warm_start_and_resume_after_imitation(tmp_path, capsys, monke
         for k, v in wo.state_dict().items():
             assert torch.equal(v, wb.state_dict()[k]), (out.name, k)
     capsys.readouterr()
-    assert _train(a, 180, "--bc-episodes", "3", "--bc-epochs", "2", "--critic-warmup", "1") == 2
+    bigger = [*warm]
+    bigger[bigger.index("--bc-episodes") + 1] = "3"
+    assert _train(a, 180, *bigger) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bc_episodes" in err[0]
 

@@ -114,6 +114,8 @@ class WarmStartConfig(Config):
     dagger_rounds: NonNegativeInt = 0  # rounds of policy-driven, teacher-labelled episodes
     dagger_episodes: Count = 20  # episodes per DAgger round
     min_std: Positive = 0.1  # floor of σ (unit action box) after cloning
+    # σ (unit action box) PPO starts from; None: the clone's (its RMS residual, floored)
+    ppo_std: Positive | None = None
     critic_warmup: NonNegativeInt = 0  # [updates] PPO updates training only the critic head
     critic_lr: Positive = 1e-3  # Adam learning rate of the critic warm-up
 

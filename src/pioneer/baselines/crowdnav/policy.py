@@ -86,8 +86,9 @@ def make_crowdnav_policy(
     forward: Forward = FORWARD,
 ) -> CrowdNavPolicy:
     """Policy factory: ``weights`` (``{scenario}`` filled in) or the shipped file for ``scenario``
-    (``variant`` "ppo": pure PPO, the ``crowdnav++`` row; "il": imitation warm start + PPO, the
-    ``crowdnav++-il`` row).
+    (``variant`` "ppo": pure PPO, the ``crowdnav++`` row; "il": imitation of sfm + PPO, the
+    ``crowdnav++-il`` row; "il-teacher": imitation of the teacher + PPO without the intrusion
+    term, the ``crowdnav++-il-teacher`` row).
 
     ``torch_threads`` sets torch's intra-op threads of this process (1: a batch-1 step gains
     nothing from threads and evaluation runs one worker per core); ``None`` leaves it.
