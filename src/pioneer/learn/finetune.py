@@ -168,7 +168,17 @@ def finetune_student(
 
         t_start, s_start = time.perf_counter(), tr.env_steps
         try:
-            _loop(tr, out, info, progress, on_update)
+            update_loop(
+                tr,
+                cfg.updates,
+                cfg.steps_per_update,
+                CURVE_COLUMNS,
+                "fine-tuning",
+                progress,
+                cfg.checkpoint_every,
+                lambda: _write_outputs(tr, out, info(), final=False),
+                on_update,
+            )
             summary = info()
             summary["steps_per_s_this_run"] = (tr.env_steps - s_start) / max(
                 time.perf_counter() - t_start, 1e-9
@@ -185,24 +195,3 @@ def _obs_dim(name: str) -> int:
     from pioneer.sim.scenarios import get_scenario
 
     return int(get_scenario(name).sim.lidar.obs_dim)
-
-
-def _loop(
-    tr: FinetuneTrainer,
-    out: Path,
-    info: Callable[[], dict[str, Any]],
-    progress: bool,
-    on_update: Callable[[dict[str, float]], None] | None,
-) -> None:
-    cfg = tr.cfg
-    update_loop(
-        tr,
-        cfg.updates,
-        cfg.steps_per_update,
-        CURVE_COLUMNS,
-        "fine-tuning",
-        progress,
-        cfg.checkpoint_every,
-        lambda: _write_outputs(tr, out, info(), final=False),
-        on_update,
-    )
