@@ -643,6 +643,58 @@ def test_an_impatient_teacher_decides_by_the_rule_terms_alone():
     assert not np.array_equal(patient.decide(world, state).scores, got.scores)
 
 
+def test_an_impatient_teacher_holds_its_impatience_for_its_hold_time():
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=5)
+    state = info["state"]
+    t = make_teacher("hr-rl", density=False, patience=1.0, patience_hold=2.0)
+    d0 = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
+
+    def at(time: float, dist: float):  # the robot ``dist`` from the goal at ``time``
+        toward = (state.goal[0] - state.robot[0, :2]) / d0
+        robot = state.robot.copy()
+        robot[0, :2] = state.goal[0] - toward * dist
+        return dataclasses.replace(state, robot=robot, t=np.array([time]))
+
+    assert not t.impatient(at(0.0, d0))
+    assert t.impatient(at(1.0, d0))  # 1 s without progress: impatient until t = 3 s
+    assert t.impatient(at(1.5, d0 - 1.0))  # progress, but within the hold
+    assert t.impatient(at(2.9, d0 - 1.5))
+    assert not t.impatient(at(3.1, d0 - 1.6))  # the hold over, and progress made
+    assert not t.impatient(at(0.0, d0))  # a new episode forgets the hold
+    assert not t.impatient(at(0.5, d0))
+
+
+def test_a_patient_teacher_that_keeps_its_margins_drops_only_the_learned_term():
+    # oracle: impatient with keep_margins, the teacher decides as the teacher without R_den
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=6)
+    for _ in range(20):
+        _, _, _, _, info = env.step([0.2, 0.0])
+    world, state = info["world"], info["state"]
+    impatient = make_teacher("hr-rl", patience=0.5, patience_keep_margins=True)
+    impatient._progress = (0.0, float(state.t[0]) - 1.0)  # no progress for 1 s
+    rules = make_teacher("hr-rl", density=False, patience=0)
+    got, want = impatient.decide(world, state), rules.decide(world, state)
+    np.testing.assert_array_equal(got.command, want.command)
+    np.testing.assert_array_equal(got.scores, want.scores)
+    dropped = make_teacher("hr-rl", patience=0.5)  # without keep_margins: the margins go too
+    dropped._progress = impatient._progress
+    bare = make_teacher("hr-rl", density=False, human_margin=0.0, wall_margin=0.0, patience=0)
+    np.testing.assert_array_equal(
+        dropped.decide(world, state).scores, bare.decide(world, state).scores
+    )
+
+
+def test_teacher_patient_is_our_teacher_with_the_chosen_patience():
+    from pioneer.control.registry import build_policy
+    from pioneer.control.teacher import PATIENT
+
+    patient, plain = build_policy("teacher-patient", "hr-rl"), build_policy("teacher", "hr-rl")
+    assert patient.config.patience == PATIENT and PATIENT.active and PATIENT.keep_margins
+    assert dataclasses.replace(patient.config, patience=Patience()) == plain.config
+
+
 def test_no_teacher_is_patient_by_default():
     from pioneer.control.registry import build_policy
 

@@ -59,7 +59,13 @@ config_flags(
     a_robot="assume_a_robot",
     start_now="assume_start_now",
 )
-config_flags(Patience, after="patience", progress="patience_progress")
+config_flags(
+    Patience,
+    after="patience",
+    progress="patience_progress",
+    hold="patience_hold",
+    keep_margins="patience_keep_margins",
+)
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")
 config_flags(FinetuneConfig, total_steps="steps", reward=None)

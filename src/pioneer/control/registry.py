@@ -172,6 +172,14 @@ _BUILTINS = (
         name="teacher-paper-no-obstacle",
     ),
     _builtin(
+        "teacher-patient",
+        _TEACHER,
+        "our teacher that drops its learned term once it makes no progress (Patience)",
+        **_TEACHER_PARTS,
+        patient=True,
+        name="teacher-patient",
+    ),
+    _builtin(
         "teacher-paper-evade",
         _TEACHER,
         "the paper's teacher with our evade fallback (no soft margins; calibrate's driver)",

@@ -60,6 +60,7 @@ from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
 
 __all__ = [
+    "PATIENT",
     "Assumptions",
     "LookaheadTeacher",
     "Patience",
@@ -144,20 +145,29 @@ class Assumptions(Config):
 class Patience(Config):
     """How long the teacher holds to what it prefers beyond the rule terms while it makes no
     progress: after ``after`` seconds in which its distance to the goal has not shrunk by
-    ``progress``, it chooses among all feasible candidates by the rule terms alone — no soft
-    margins, no learned term — until it makes progress again. The learned term was fitted
-    where people walk 0.5–0.7 m/s and the margins were chosen in the paper world; where people
-    are faster or do not queue, the two together make the teacher wait for a gap that never
-    comes. Off by default: measured, it does not lift those variants (docs/teacher.md,
-    "Patience")."""
+    ``progress`` (a crawl towards the door is no progress), it gives up the learned term —
+    and, unless ``keep_margins``, the soft margins — and chooses by the rule terms alone, for
+    ``hold`` seconds at least, then until it has made progress again. The learned term was
+    fitted where people walk 0.5–0.7 m/s; where people are faster or do not queue it makes
+    the teacher hang back until boarders have settled in the doorway. Off by default (the
+    paper's teacher and ours); :data:`PATIENT` is the setting chosen on validation episodes,
+    the policy ``teacher-patient`` (docs/teacher.md, "Patience")."""
 
     after: NonNegative = 0.0  # [s] without progress before it gives up its preferences (0: never)
     progress: Positive = 0.05  # [m] a shorter distance to the goal by this much is progress
+    hold: NonNegative = 0.0  # [s] once impatient, it stays so this long whatever its progress
+    keep_margins: bool = False  # impatient, it still prefers the candidates that keep the margins
 
     @property
     def active(self) -> bool:
         """Whether the teacher is ever impatient (``after`` > 0)."""
         return self.after > 0.0
+
+
+# Chosen on validation episodes of the examples/ variants and the paper worlds (docs/teacher.md):
+# no 0.4 m of progress in 2 s (a crawl below 0.2 m/s) and the learned term is dropped for the rest
+# of the episode (100 s: longer than any episode here); the margins stay.
+PATIENT = Patience(after=2.0, progress=0.4, hold=100.0, keep_margins=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -240,12 +250,14 @@ class LookaheadTeacher:
         self.last: TeacherDecision | None = None
         self._assumed: dict[str, Any] = {}  # the world with the assumed reaction (Assumptions)
         self._progress = (math.inf, 0.0)  # (best distance to the goal [m], when it was made [s])
+        self._impatient_until = -math.inf  # [s] (Patience.hold)
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Forget the previous command and the progress made."""
         self._prev = np.zeros(2)
         self.last = None
         self._progress = (math.inf, 0.0)
+        self._impatient_until = -math.inf
 
     def impatient(self, state: State) -> bool:
         """Note the progress to ``state`` (B = 1) and say whether the teacher has made none for
@@ -255,9 +267,16 @@ class LookaheadTeacher:
         d = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
         t = float(state.t[0])
         best, since = self._progress
+        if t < since:  # a new episode
+            self._impatient_until = -math.inf
         if d < best - p.progress or t < since:
             self._progress = best, since = d, t
-        return p.active and t - since >= p.after - 1e-9
+        if not p.active:
+            return False
+        if t - since >= p.after - 1e-9:
+            self._impatient_until = max(self._impatient_until, t + p.hold)
+            return True
+        return t < self._impatient_until - 1e-9
 
     def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
         """Decide from the privileged ``info["state"]`` and ``info["world"]``."""
@@ -345,7 +364,8 @@ class LookaheadTeacher:
         r_goal = goal_term(d_goal, d_total)
         feasible = ~ro.collided & (ro.min_gap >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
-        chosen = feasible if impatient else self._preferred(feasible, ro)
+        drop_margins = impatient and not cfg.patience.keep_margins
+        chosen = feasible if drop_margins else self._preferred(feasible, ro)
         # Only candidates that can be chosen are observed and scored by the density: about half
         # collide in the paper world, and the rays and the density are most of a decision's
         # arithmetic. (The others keep 0 for both terms; they score −∞.)
@@ -408,6 +428,10 @@ def make_teacher(
     assume_a_robot: float | None = Assumptions.a_robot,
     assume_start_now: bool = Assumptions.start_now,
     patience: float = Patience.after,
+    patience_progress: float = Patience.progress,
+    patience_hold: float = Patience.hold,
+    patience_keep_margins: bool = Patience.keep_margins,
+    patient: bool = False,
     name: str = "teacher",
 ) -> LookaheadTeacher:
     """The PioneeR teacher for ``scenario``: reward from ``reward`` (a model file) or fitted on
@@ -418,7 +442,9 @@ def make_teacher(
     [m], ``assume_a_robot`` [m/s²] and ``assume_start_now`` what its predictions assume of
     every person (:class:`Assumptions`; beyond the paper); ``patience`` [s] how long it holds
     to its margins and learned term without progress (:class:`Patience`; 0: always, as the
-    paper's teacher)."""
+    paper's teacher), ``patience_progress`` [m], ``patience_hold`` [s] and
+    ``patience_keep_margins`` the rest of :class:`Patience`; ``patient``: :data:`PATIENT`
+    instead of those four (the policy ``teacher-patient``)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -437,6 +463,13 @@ def make_teacher(
             human_radius=assume_radius, a_robot=assume_a_robot, start_now=assume_start_now
         ),
         weights=RuleWeights(use_density=density, use_goal=goal, use_obstacle=obstacle),
-        patience=Patience(after=patience),
+        patience=PATIENT
+        if patient
+        else Patience(
+            after=patience,
+            progress=patience_progress,
+            hold=patience_hold,
+            keep_margins=patience_keep_margins,
+        ),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)
