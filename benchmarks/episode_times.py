@@ -186,8 +186,10 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.rows:
         records = [r for r in records if r["policy"] in set(args.rows)]
-    times = updated(old, records, when.isoformat(), machine, scale, notes, probe_seconds())
-    if args.relative_to or args.round_robin:  # the rows are the file's machine's and date's
+    scaled_to_file = bool(args.relative_to or args.round_robin)  # rows in the file's machine's terms
+    probe = None if scaled_to_file else probe_seconds()  # None: the file's probe stays
+    times = updated(old, records, when.isoformat(), machine, scale, notes, probe)
+    if scaled_to_file:  # the file keeps its machine, date and speed
         times = dataclasses.replace(times, measured=old.measured, machine=old.machine)
     write_text_atomic(args.output, json.dumps(times.to_dict(), indent=2) + "\n")
     for row in sorted(measured(records)):

@@ -220,6 +220,35 @@ def test_the_benchmark_script_updates_the_rows_it_measured(monkeypatch):
     assert bench.relative_scale(busy, old, "teacher") == pytest.approx(3.0)
 
 
+def test_rows_scaled_to_the_file_keep_its_machine_date_and_probe(monkeypatch, tmp_path):
+    # --relative-to: the new rows are carried to the file's machine, so the file's probe (its
+    # machine's speed) must stay; a plain run stores this machine's probe with its times
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2]))  # the repository
+    from benchmarks import episode_times as bench
+
+    from pioneer.experiments.timing import episode_times
+
+    old = episode_times()
+    out = tmp_path / "times.json"
+    out.write_text(json.dumps(old.to_dict()))
+    run = tmp_path / "run"
+    (run / "eval").mkdir(parents=True)
+    (run / "eval" / bench.EPISODES_FILE).write_text("")
+    busy = [
+        {"policy": "teacher", "wall_time_s": 2 * old.of("teacher")},
+        {"policy": "my-row", "wall_time_s": 1.0},
+    ]
+    monkeypatch.setattr(bench, "read_records", lambda path: busy)
+    monkeypatch.setattr(bench, "probe_seconds", lambda: 99.0)
+    argv = [str(run), "--output", str(out), "--rows", "my-row"]
+    assert bench.main([*argv, "--relative-to", "teacher"]) == 0
+    new = bench.load_episode_times(out)
+    assert new.of("my-row") == pytest.approx(0.5)  # halved: the run was twice as slow
+    assert (new.probe_s, new.measured, new.machine) == (old.probe_s, old.measured, old.machine)
+    assert bench.main(argv) == 0  # a run on this machine: its probe is stored
+    assert bench.load_episode_times(out).probe_s == 99.0
+
+
 def test_the_jit_cache_is_found_where_numba_keeps_it(tmp_path, monkeypatch):
     from numba.core import config
 
