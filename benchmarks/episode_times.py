@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.rows:
         records = [r for r in records if r["policy"] in set(args.rows)]
-    scaled_to_file = bool(args.relative_to or args.round_robin)  # rows in the file's machine's terms
+    scaled_to_file = bool(args.relative_to or args.round_robin)  # in the file machine's terms
     probe = None if scaled_to_file else probe_seconds()  # None: the file's probe stays
     times = updated(old, records, when.isoformat(), machine, scale, notes, probe)
     if scaled_to_file:  # the file keeps its machine, date and speed
