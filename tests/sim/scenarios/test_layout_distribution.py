@@ -3,6 +3,7 @@ distribution's ranges, reproducible from a seed, usable as a scenario file."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -184,3 +185,41 @@ def test_the_held_out_layouts_lie_outside_the_training_distribution(clean_regist
             not dist.lidar_noise[0] <= sim.lidar.noise_std <= dist.lidar_noise[1],
         ]
         assert sum(outside) == 1, name  # exactly one factor outside: a clean held-out test
+
+
+def test_queueing_and_deep_exits_are_drawn_by_their_shares_and_cost_no_draw_at_0_or_1():
+    rng = lambda: np.random.default_rng(7)  # noqa: E731
+    plain = [sample_layout(LayoutDistribution(), g)[0] for g in [rng()] for _ in range(40)]
+    assert all(lay.boarders_queue and lay.exit_start_y is None for lay in plain)
+    g = rng()
+    never = [sample_layout(LayoutDistribution(queue_share=0.0), g)[0] for _ in range(40)]
+    # the same draws as with the defaults (no draw at a share of 0 or 1), only the queue differs
+    assert [dataclasses.replace(lay, boarders_queue=True) for lay in never] == plain
+    g = rng()
+    deep = [sample_layout(LayoutDistribution(deep_exit_share=1.0), g)[0] for _ in range(40)]
+    for lay, ref in zip(deep, plain, strict=True):
+        lo, hi = lay.exit_start_y
+        assert lo == pytest.approx(lay.human_radius + 0.1, abs=1e-3)
+        assert hi == pytest.approx(lay.cabin_depth - lay.human_radius - lay.margin, abs=1e-3)
+        assert dataclasses.replace(lay, exit_start_y=None) == ref
+    g = np.random.default_rng(8)
+    half = LayoutDistribution(queue_share=0.5, deep_exit_share=0.5)
+    mixed = [sample_layout(half, g)[0] for _ in range(400)]
+    queued = np.mean([lay.boarders_queue for lay in mixed])
+    deeper = np.mean([lay.exit_start_y is not None for lay in mixed])
+    assert 0.4 < queued < 0.6 and 0.4 < deeper < 0.6  # 400 draws: ±0.1 is > 4 σ
+
+
+def test_layouts_without_queue_and_with_deep_exits_are_valid_scenarios(clean_registry, tmp_path):
+    variants, _ = sample_variants(
+        LayoutDistribution(queue_share=0.0, deep_exit_share=1.0), 3, seed=2, prefix="wide"
+    )
+    path = tmp_path / "wide.json"
+    path.write_text(json.dumps({"format": SCENARIO_FILE_FORMAT, "scenarios": variants}))
+    assert scenarios.load_scenario_file(path) == list(variants)  # built and placed
+    for name, entry in variants.items():
+        assert entry["elevator"]["boarders_queue"] is False and "exit_start_y" in entry["elevator"]
+        cfg = get_scenario(name)
+        for s in range(5):  # every start state is collision-free, nobody outside the walls
+            st = sample_state(cfg, np.random.default_rng(1000 + s))
+            assert st.gap[0] > 0.0 and st.wall_gap[0] > 0.0

@@ -71,6 +71,10 @@ class LayoutDistribution(Config):
     a_robot: Range = (0.0, 2.0)  # [m/s²] the humans' reaction to the robot (0: invisible)
     reacts_share: UnitInterval = 0.8  # probability that a group (boarders, exiting) reacts at all
     lidar_noise: Range = (0.0, 0.03)  # [m] Gaussian range noise σ
+    queue_share: UnitInterval = 1.0  # probability that the boarders let the exiting out first
+    # probability that the exiting passengers may start anywhere in the cabin's depth (else in
+    # its front part, ElevatorLayout's default r_h + 0.3 … r_h + 0.9 m)
+    deep_exit_share: UnitInterval = 0.0
     # the humans' sides to draw from: "right" → HR-RL, "left" → HL-RR
     sides: Annotated[tuple[HumanSide, ...], MinLen(1)] = ("right", "left")
 
@@ -85,6 +89,9 @@ def sample_layout(
 
     def k(r: tuple[int, int]) -> int:
         return int(rng.integers(r[0], r[1] + 1))
+
+    def p(share: float) -> bool:  # no draw at 0 or 1: the draws of other layouts stay the same
+        return share >= 1.0 or (share > 0.0 and bool(rng.random() < share))
 
     w, d = u(dist.lobby_width), u(dist.lobby_depth)
     cabin_w = min(u(dist.cabin_width), w)
@@ -119,6 +126,12 @@ def sample_layout(
         social_force=dataclasses.replace(base.social_force, a_robot=u(dist.a_robot)),
         lidar=dataclasses.replace(base.lidar, noise_std=u(dist.lidar_noise)),
     )
+    if not p(dist.queue_share):
+        layout = dataclasses.replace(layout, boarders_queue=False)
+    if p(dist.deep_exit_share):  # from just inside the door to the cabin's back wall
+        r_h = layout.human_radius
+        deep = (round(r_h + 0.1, 3), round(layout.cabin_depth - r_h - layout.margin, 3))
+        layout = dataclasses.replace(layout, exit_start_y=deep)
     return layout, sim
 
 
