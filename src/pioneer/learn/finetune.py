@@ -35,7 +35,8 @@ PPO
     :class:`~pioneer.learn.layout_env.LayoutEnvs`: ``groups`` layouts × ``group_size`` copies;
     every ``layout_period`` updates every group draws a new layout.
 
-Outputs in ``out/`` (each written atomically)
+Outputs in ``out/`` (each written atomically)::
+
     ``student.safetensors``   the fine-tuned student (the input's format and config: it runs,
                               exports and deploys like any student);
     ``checkpoint.safetensors`` the whole training state every ``checkpoint_every`` updates
