@@ -46,7 +46,9 @@ def _history(text: str) -> list[str]:
     return found
 
 
-@pytest.mark.parametrize("page", [p for p in GUIDE if p.name not in NOT_GUIDE], ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "page", [p for p in GUIDE if p.name not in NOT_GUIDE], ids=lambda p: p.name
+)
 def test_a_guide_page_carries_no_history(page: Path) -> None:
     found = _history(page.read_text(encoding="utf-8"))
     assert not found, (

@@ -40,7 +40,8 @@ STUDENT_SELECT_EPISODES = 100
 # the teacher's own previous label (docs/notes/2026-11-25-why-the-students-crash.md)
 STUDENT_LABEL_PREV = "teacher"
 # whether each shipped kind also reads its own last command u_{t-1} (--previous-command),
-# chosen on validation episodes: it helps the MDN, not the MLP (docs/student.md, "The shipped recipe")
+# chosen on validation episodes: it helps the MDN, not the MLP
+# (docs/student.md, "The shipped recipe")
 STUDENT_PREVIOUS_COMMAND = {"mdn": True, "mlp": False}
 
 
