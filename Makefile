@@ -26,8 +26,8 @@ demo: $(STAMP)
 test: $(STAMP) lint typecheck pytest
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests benchmarks docs
-	$(VENV)/bin/ruff format --check src tests benchmarks docs
+	$(VENV)/bin/ruff check src tests benchmarks docs/conf.py docs/_ext
+	$(VENV)/bin/ruff format --check src tests benchmarks docs/conf.py docs/_ext
 	$(VENV)/bin/lint-imports
 
 typecheck: $(STAMP)

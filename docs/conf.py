@@ -75,12 +75,19 @@ def _escape_bars(app: Any, what: str, name: str, obj: Any, options: Any, lines: 
         lines[:] = [_RST_SPECIAL.sub(r"\\\1", line) for line in lines]
         return
     literal_indent: int | None = None  # inside a literal block (after "::"): left as it is
+    in_code = False  # inside an inline literal (``…``), which may run over lines
     for i, line in enumerate(lines):
         indent = len(line) - len(line.lstrip())
         if literal_indent is not None and line.strip() and indent <= literal_indent:
             literal_indent = None
         if literal_indent is None:
-            lines[i] = _ABS.sub(r"\\|\1\\|", line)
+            parts = line.split("``")
+            for k in range(len(parts)):
+                if not in_code:
+                    parts[k] = _ABS.sub(r"\\|\1\\|", parts[k])
+                if k < len(parts) - 1:
+                    in_code = not in_code
+            lines[i] = "``".join(parts)
             if line.rstrip().endswith("::"):
                 literal_indent = indent
 

@@ -1,5 +1,5 @@
 """Reinforcement-learning fine-tuning of a DAgger student over a layout distribution (beyond
-the paper; docs/student.md, "Fine-tuning with reinforcement learning").
+the paper; docs/general-student.md, "Fine-tuning").
 
 ``pioneer finetune --student FILE --scenario 'general-*' --out DIR`` calls
 :func:`finetune_student`. DAgger teaches the student the teacher's single choice, made with a
