@@ -1,22 +1,24 @@
 """Sphinx extension: the CLI reference, written from each command's own ``--help``.
 
 When the site builds, the command tree of ``pioneer`` is walked and ``pioneer PATH --help`` is
-run for every command and group (a subprocess each, as a user would type it); the outputs go
-into ``reference/cli.md`` (generated, not committed), so the page cannot fall behind the CLI.
+run for every command and group (through the console script's own entry point,
+:func:`pioneer.cli.main`, in this process: a subprocess each would import torch again for
+every command); the outputs go into ``reference/cli.md`` (generated, not committed), so the
+page cannot fall behind the CLI.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
-import subprocess
-import sys
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 from sphinx.application import Sphinx
 
+from pioneer.cli import main
 from pioneer.cli._app import _TREE, _Group
 
 PAGE = Path("reference") / "cli.md"
@@ -41,24 +43,37 @@ def _paths(group: _Group, prefix: tuple[str, ...] = ()) -> Iterator[tuple[str, .
 
 
 def _help(path: tuple[str, ...]) -> str:
-    env = {**os.environ, "COLUMNS": WIDTH, "NO_COLOR": "1", "TERM": "dumb"}
-    done = subprocess.run(
-        [sys.executable, "-m", "pioneer.cli", *path, "--help"],
-        capture_output=True,
-        text=True,
-        env=env,
-        check=False,
-    )
-    if done.returncode != 0:
+    out = io.StringIO()
+    code: int | str | None
+    with contextlib.redirect_stdout(out), _environment(COLUMNS=WIDTH):
+        try:
+            code = main([*path, "--help"])
+        except SystemExit as exc:  # argparse's --help exits 0
+            code = exc.code
+    if code not in (0, None):
         command = " ".join(("pioneer", *path))
-        raise RuntimeError(f"{command} --help exited {done.returncode}: {done.stderr}")
-    return done.stdout.rstrip()
+        raise RuntimeError(f"{command} --help exited {code}")
+    return out.getvalue().rstrip()
+
+
+@contextlib.contextmanager
+def _environment(**values: str) -> Iterator[None]:
+    """Set environment variables for the duration of the block (the help's width)."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def write_page(app: Sphinx) -> None:
     paths = [(), *_paths(_TREE)]
-    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-        helps = list(pool.map(_help, paths))
+    helps = [_help(path) for path in paths]
     parts = [INTRO]
     for path, text in zip(paths, helps, strict=True):
         title = " ".join(("pioneer", *path))
