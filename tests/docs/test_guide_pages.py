@@ -4,7 +4,8 @@ The guide (``README.md`` and ``docs/*.md``) says what the code does now and its 
 figures; the dated studies are the research log (``docs/notes/``) and the history is
 ``CHANGELOG.md``. So no guide page carries a date, a run number or an "until …" history (a
 link to a dated note is fine: its file name is not a claim of the page), and the performance
-page stays a page of targets and one current figure each.
+page stays a page of targets and one current figure each (at most 250 lines), the README a
+front door (at most 150).
 """
 
 from __future__ import annotations
@@ -77,11 +78,17 @@ def test_the_patterns_catch_what_they_should(line: str, bad: bool) -> None:
     assert bool(_history(line)) == bad
 
 
-def test_the_performance_page_stays_short() -> None:
-    lines = (ROOT / "docs" / "performance.md").read_text(encoding="utf-8").splitlines()
-    assert len(lines) <= 250, (
-        f"docs/performance.md has {len(lines)} lines (at most 250): keep the targets and one "
-        "current figure each; move studies to docs/notes/"
+@pytest.mark.parametrize(
+    ("page", "most", "fix"),
+    [
+        ("docs/performance.md", 250, "keep the targets and one current figure each"),
+        ("README.md", 150, "keep it a front door: what it is, install, an example, links"),
+    ],
+)
+def test_the_pages_that_must_stay_short(page: str, most: int, fix: str) -> None:
+    lines = (ROOT / page).read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= most, (
+        f"{page} has {len(lines)} lines (at most {most}): {fix}; move studies to docs/notes/"
     )
 
 
