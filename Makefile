@@ -3,8 +3,9 @@ PYTHON ?= python3.11
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: demo test lint typecheck pytest smoke bench clean clean-cache
+.PHONY: demo test lint typecheck pytest smoke bench docs clean clean-cache
 
 # The package states ranges (pyproject.toml); the exact versions installed here, torch's CPU
 # build among them, are in constraints.txt.
@@ -25,8 +26,8 @@ demo: $(STAMP)
 test: $(STAMP) lint typecheck pytest
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests benchmarks
-	$(VENV)/bin/ruff format --check src tests benchmarks
+	$(VENV)/bin/ruff check src tests benchmarks docs/conf.py docs/_ext
+	$(VENV)/bin/ruff format --check src tests benchmarks docs/conf.py docs/_ext
 	$(VENV)/bin/lint-imports
 
 typecheck: $(STAMP)
@@ -43,6 +44,19 @@ smoke: $(STAMP)
 ## Performance benchmarks; medians go to benchmarks/results/ and docs/performance.md.
 bench: $(STAMP)
 	$(PY) benchmarks/run.py
+
+## The docs site into build/docs (open build/docs/index.html); any warning fails the build.
+## The API reference is generated from the docstrings, the CLI reference from each command's
+## --help (docs/conf.py); the docs tools come from the [docs] extra, pinned in constraints.txt.
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/sphinx-build -b html -W --keep-going -q -j 2 docs build/docs
+	@echo "site: build/docs/index.html"
+
+$(DOCS_STAMP): $(STAMP)
+	@echo "installing the docs tools into $(VENV) (pip's output: $(VENV)/install-docs.log)"
+	@$(PY) -m pip install -c constraints.txt -e ".[docs]" > $(VENV)/install-docs.log 2>&1 \
+	  || { tail -n 40 $(VENV)/install-docs.log; echo "install failed: see $(VENV)/install-docs.log"; exit 1; }
+	@touch $(DOCS_STAMP)
 
 ## Drop numba's on-disk caches (after editing a kernel that other kernels call).
 clean-cache:

@@ -30,8 +30,8 @@ valid source beam within half a beam spacing is *unseen*, and its range is fille
 
 - ``"obstacle"`` (the default, :data:`DEFAULT_UNSEEN`): range 0, an obstacle at the robot —
   never free space that was not observed. Chosen by measurement: the shipped students keep
-  their success rate with a 270° scanner under it (docs/student.md, "A scanner that does not
-  see all around");
+  their success rate with a 270° scanner under it (docs/deployment.md, "A scanner that does
+  not see all around");
 - ``"nearest"``: the range of the angularly nearest seen direction (on a tie the shorter);
 - ``"max_range"``: ``max_range``, i.e. free space — the optimistic rule of earlier versions.
 

@@ -3,7 +3,7 @@ without a network: it declares numpy and onnxruntime only, with the main project
 wheel lists the runtime modules of ``src/pioneer`` (no copy), and they import nothing else;
 and the runtime runs on a shipped student with every other package blocked.
 
-The installed size is measured by hand in a fresh venv (README "Install").
+The installed size is measured by hand in a fresh venv (docs/deployment.md, "The light runtime").
 """
 
 from __future__ import annotations

@@ -37,10 +37,11 @@ STUDENT_SEEDS = (0, 1, 2)  # the DAgger seeds of the shipped students (Table III
 # validation episodes that chose each shipped student among its run's rounds (--select-episodes)
 STUDENT_SELECT_EPISODES = 100
 # the label's u_{t-1} (--label-prev) of every shipped student, chosen on validation episodes:
-# the teacher's own previous label (docs/student.md, "Remedies")
+# the teacher's own previous label (docs/notes/2026-11-25-why-the-students-crash.md)
 STUDENT_LABEL_PREV = "teacher"
 # whether each shipped kind also reads its own last command u_{t-1} (--previous-command),
-# chosen on validation episodes: it helps the MDN, not the MLP (docs/student.md, "Remedies")
+# chosen on validation episodes: it helps the MDN, not the MLP
+# (docs/student.md, "The shipped recipe")
 STUDENT_PREVIOUS_COMMAND = {"mdn": True, "mlp": False}
 
 

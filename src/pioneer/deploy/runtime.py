@@ -2,7 +2,7 @@
 
 Imports numpy, onnxruntime and :mod:`pioneer.laser` only — never torch, numba or the
 simulator — so it runs on a robot computer with the light distribution
-``pip install ./runtime`` (numpy and onnxruntime, README "Install"), starts in well under a
+``pip install ./runtime`` (numpy and onnxruntime, docs/deployment.md), starts in well under a
 second and compiles nothing at its first scan. The ONNX file comes from
 :func:`pioneer.learn.export.export_onnx`; its graph already computes the deterministic action
 and the aleatoric/epistemic uncertainty, so a decision is one ``session.run`` on a batch of 1.

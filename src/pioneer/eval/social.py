@@ -76,8 +76,9 @@ def accelerations(speed: F64, dt: float, initial: float = 0.0) -> F64:
 
 
 def heading_change(theta: F64) -> float:
-    """Cumulative heading change [rad] of headings ``theta (T+1,)`` [rad]: Σ |wrap(θ_k −
-    θ_{k−1})| with wrap into (−π, π] (navmet's cumulative heading changes, Okal & Arras)."""
+    """Cumulative heading change [rad] of headings ``theta (T+1,)`` [rad]:
+    Σ |wrap(θ_k − θ_{k−1})| with wrap into (−π, π] (navmet's cumulative heading changes, Okal
+    & Arras)."""
     th = np.asarray(theta, dtype=np.float64)
     if th.size < 2:
         return 0.0

@@ -1,5 +1,5 @@
 """Which fill rule for directions a scanner does not see: the shipped students driven by the
-robot runtime in simulation, with a scanner of a narrower field of view (docs/student.md,
+robot runtime in simulation, with a scanner of a narrower field of view (docs/deployment.md,
 "A scanner that does not see all around").
 
 Each step, :class:`ScannerPolicy` casts the simulator's 72 beams, keeps those within ±fov/2 of

@@ -1,6 +1,7 @@
 """``pioneer reproduce``: the paper's tables and figures from the shipped demonstrations.
 
 Steps (each output is written atomically; the evaluation resumes if interrupted):
+
 1. fit the density reward of each elevator scenario on its shipped demos → ``models/``;
 2. evaluate the teacher, its three ablations, the baselines (paper Tables I–II), and the shipped
    DAgger students — MDN, MLP and the uncertainty-shielded MDN (Table III) — on HR-RL and HL-RR;

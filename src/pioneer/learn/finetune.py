@@ -1,5 +1,5 @@
 """Reinforcement-learning fine-tuning of a DAgger student over a layout distribution (beyond
-the paper; docs/student.md, "Fine-tuning with reinforcement learning").
+the paper; docs/general-student.md, "Fine-tuning").
 
 ``pioneer finetune --student FILE --scenario 'general-*' --out DIR`` calls
 :func:`finetune_student`. DAgger teaches the student the teacher's single choice, made with a
@@ -35,7 +35,8 @@ PPO
     :class:`~pioneer.learn.layout_env.LayoutEnvs`: ``groups`` layouts × ``group_size`` copies;
     every ``layout_period`` updates every group draws a new layout.
 
-Outputs in ``out/`` (each written atomically)
+Outputs in ``out/`` (each written atomically)::
+
     ``student.safetensors``   the fine-tuned student (the input's format and config: it runs,
                               exports and deploys like any student);
     ``checkpoint.safetensors`` the whole training state every ``checkpoint_every`` updates

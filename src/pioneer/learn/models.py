@@ -112,7 +112,7 @@ class StudentConfig(Config):
     # Beyond the paper: mirror-equivariant by construction — the policy of the inputs x is
     # ½ p(u | x) + ½ p(m(u) | M x) (MDN; the MLP averages f(x) and m(f(M x))), M the world
     # mirrored x → −x and m(v, ω) = (v, −ω), so its command for a mirrored observation is the
-    # mirrored command (docs/student.md, "Symmetry built in")
+    # mirrored command (docs/general-student.md, "Symmetry built in")
     symmetric: bool = False
     # how a symmetric MDN trains: each half's own likelihood on the frame and on its mirror
     # image ("each_half": both halves fit both sides), or the symmetric mixture's ("mixture":

@@ -1,5 +1,5 @@
 """The CrowdNav++ reward (Liu et al., ICRA 2023; its public code's unicycle terms): the reward
-the CrowdNav++ baseline is trained on, and the Gymnasium environments' own reward.
+the CrowdNav++ baseline is trained on, and the Gymnasium environments' own reward::
 
     r = +10                                  on success
         −20                                  on collision (a human or a wall)

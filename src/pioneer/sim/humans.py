@@ -19,6 +19,7 @@ Integration is semi-implicit Euler: v ← cap(v + f h), p ← p + v h, with the 
 ‖v‖ ≤ 1.3 · v_pref (never a cap on the *initial* speed, so a human starting at rest moves).
 
 Deviations from a bare social-force model, all documented in docs/simulator.md:
+
 - Walls are hard: after the update a human whose body overlaps a wall is projected back to
   contact and loses its velocity into the wall, so a human can never cross a wall.
 - A human that reaches its final goal stops (v = 0) and stays as a static obstacle. A human

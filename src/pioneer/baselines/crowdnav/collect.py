@@ -1,7 +1,8 @@
-"""The worker side of CrowdNav++'s imitation warm start (:mod:`.imitation`): one episode
-driven by the expert through the policy's action space, or by a clone (DAgger), with the
-expert's action as the label of every step (:func:`collect_episode`), written to its file by
-:func:`collect_task`; the world, the expert and the round's clone are cached per process."""
+"""The worker side of CrowdNav++'s imitation warm start
+(:mod:`~pioneer.baselines.crowdnav.imitation`): one episode driven by the expert through the
+policy's action space, or by a clone (DAgger), with the expert's action as the label of every step
+(:func:`collect_episode`), written to its file by :func:`collect_task`; the world, the expert and
+the round's clone are cached per process."""
 
 from __future__ import annotations
 

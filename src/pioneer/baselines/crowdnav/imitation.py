@@ -6,8 +6,8 @@ CrowdNav++ runs settle in a local optimum — drive toward the door and wait (th
 at 2.5 M steps; the paper world even with the original's 20 M steps: docs/baselines.md) — so
 ``pioneer train crowdnav++ --bc-episodes N`` first imitates the
 privileged lookahead teacher (:func:`pioneer.control.teacher.make_teacher`) and then
-fine-tunes with PPO (:mod:`.ppo`). This is a deviation from CrowdNav++, which
-trains by RL alone; docs/baselines.md reports both.
+fine-tunes with PPO (:mod:`~pioneer.baselines.crowdnav.ppo`). This is a deviation from
+CrowdNav++, which trains by RL alone; docs/baselines.md reports both.
 
 Demonstrations in the policy's action space
     The teacher drives the scenario *through the policy's action space*: at every step its
@@ -41,7 +41,8 @@ Critic warm-up (in :mod:`pioneer.baselines.crowdnav.ppo`)
     the cloned policy's returns, with the shared encoder, GRU and actor frozen, so that PPO's
     first policy updates use sensible advantages instead of a random critic's.
 
-Files (in the training ``out``; written atomically, no pickle)
+Files (in the training ``out``; written atomically, no pickle)::
+
     ``imitation/config.json``   the phase's settings; a rerun with others is refused;
     ``imitation/rounds/round-RR/ep-EEE.npz``  one labelled episode (:mod:`.bc_data`); a rerun
                                 collects only the missing ones;

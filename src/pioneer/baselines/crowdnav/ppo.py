@@ -34,10 +34,10 @@ values, except:
   0.5 the critic's gradient reshaped the shared layers and took the clone from 80 to 20 %
   success on validation episodes, docs/baselines.md).
 
-Imitation warm start (``--bc-episodes N``, :mod:`.imitation`; a deviation from
-CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
-clones the lookahead teacher (optionally with DAgger rounds); its result is stored in ``out``
-and in the first checkpoint, so a resumed run never redoes it. ``--critic-warmup U``: the
+Imitation warm start (``--bc-episodes N``, :mod:`~pioneer.baselines.crowdnav.imitation`; a deviation
+from CrowdNav++, after the imitation pretraining of the CrowdNav family): before PPO the network
+clones the lookahead teacher (optionally with DAgger rounds); its result is stored in ``out`` and in
+the first checkpoint, so a resumed run never redoes it. ``--critic-warmup U``: the
 first U updates train only the critic head (own Adam), the cloned actor frozen, so PPO's
 first policy updates see a fitted critic. ``--ppo-std S``: PPO starts from σ = S instead of the
 clone's σ (its RMS residual). All are off by default (pure PPO, as above).
@@ -53,7 +53,8 @@ two threads train ≈ 1.2× faster, beside another busy process ≈ 2× slower, 
 a seeded run repeats itself with any fixed number, and on the hosts measured 1 and 2 threads
 gave the same weights bit for bit).
 
-Outputs in ``out/`` (each written atomically)
+Outputs in ``out/`` (each written atomically)::
+
     ``checkpoint.safetensors``  the whole training state every ``checkpoint_every`` updates:
                                 weights, Adam moments, the environments' states, GRU states,
                                 episode accumulators, the learning curve and the RNG states

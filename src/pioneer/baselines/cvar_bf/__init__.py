@@ -72,7 +72,7 @@ linearisation is conservative too). For walls the radius is always inflated by �
 the robot's centre, behind p_l, clipped a door jamb in 2 of 20 HR-RL episodes; the 1.8 m door
 still leaves p_l a 0.9 m wide passage.
 
-*QP.* In z = (v, ω, ζ_1…ζ_N, η_11…η_NS):
+*QP.* In z = (v, ω, ζ_1…ζ_N, η_11…η_NS)::
 
     minimise  w_v (v − v_nom)² + w_ω (ω − ω_nom)²
     s.t.      the linearised CVaR constraints of every present human (status ≠ GONE),

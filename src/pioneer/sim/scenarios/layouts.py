@@ -217,6 +217,7 @@ def elevator_scenario(
     """Build the elevator co-boarding scenario (HR-RL by default) from a layout.
 
     Placement (human side = right; "left" mirrors every x):
+
     - the robot starts in the lobby, between the boarders, facing the door; its goal is in the
       left cabin half;
     - boarding humans start in the lobby at alternating sides of the robot and walk through
