@@ -317,7 +317,7 @@ def test_a_signal_keeps_the_finished_updates_and_the_rerun_resumes(resumed, tmp_
 @pytest.mark.parametrize("scenario", ["hr-rl", "hl-rr"])
 def test_the_shipped_policy_loads_without_weights(scenario):
     """The `sb3-ppo` row of Table I: the shipped file of each scenario, the files it recorded."""
-    from pioneer.control.parts import sb3_files
+    from pioneer.control.policy_files import sb3_files
     from pioneer.data import shipped_sb3_weights
 
     policy = build_policy("sb3-ppo", scenario)

@@ -25,7 +25,7 @@ import pytest
 import torch
 
 import pioneer.learn.dagger as dagger
-import pioneer.reward.default as reward_default
+import pioneer.reward.recipe as reward_default
 from pioneer.cli import main
 from pioneer.control.teacher import Assumptions, SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv

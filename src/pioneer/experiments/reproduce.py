@@ -109,7 +109,7 @@ def _time_table(records: Sequence[dict[str, Any]], workers: int) -> str:
 
 def fit_models(out: Path, scenarios: Sequence[str]) -> dict[str, str]:
     """Fit and save the reward of every scenario; returns the model paths."""
-    from pioneer.reward.default import default_reward
+    from pioneer.reward.recipe import default_reward
 
     paths = {}
     for sc in scenarios:

@@ -307,8 +307,8 @@ def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> li
     so a refused run leaves the file system as it was): the reward file loads and fits each
     scenario, or the default reward each needs can be fitted (on its base's shipped demos);
     a resumed run has the same settings and scenario definitions."""
-    from pioneer.reward.default import check_reward_fits, default_reward
     from pioneer.reward.density import DensityReward
+    from pioneer.reward.recipe import check_reward_fits, default_reward
 
     check_count(
         "DAgger episodes (--teacher-episodes + --rounds × --episodes-per-round)",
@@ -358,7 +358,7 @@ def _prepare(
         write_text_atomic(out / SCENARIO_FILE, to_json(scenarios, indent=1) + "\n")
     if reward is not None:
         return dict.fromkeys(names, Path(reward))
-    from pioneer.reward.default import default_reward
+    from pioneer.reward.recipe import default_reward
 
     paths = _default_reward_paths(out, names)
     for name, path in paths.items():

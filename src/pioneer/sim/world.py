@@ -27,7 +27,7 @@ from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE, SocialForceConfig
 from pioneer.sim.kernel import step_kernel, trajectory_kernel
-from pioneer.sim.lanes import trajectory_kernel_lanes
+from pioneer.sim.kernel_simd import trajectory_kernel_lanes
 from pioneer.sim.lidar import (
     RAY_PRECISION,
     LidarConfig,
@@ -314,9 +314,10 @@ def advance(
 
     With ``stop_at_collision`` a copy is not advanced once it has collided (a planner discards
     a colliding candidate): every copy that never collides gets the same values, bit for bit.
-    With ``lanes`` the copies run in SIMD lanes (:mod:`pioneer.sim.lanes`): the same values, bit
-    for bit, faster for many copies; with ``vector_exp`` too, its social forces take e^z from
-    ``lanes.exp_lanes`` (within 2 ulp of ``math.exp``): faster still, no longer bit for bit.
+    With ``lanes`` the copies run in SIMD lanes (:mod:`pioneer.sim.kernel_simd`): the same
+    values, bit for bit, faster for many copies; with ``vector_exp`` too, its social forces take
+    e^z from ``vecmath.exp64_lanes`` (within 2 ulp of ``math.exp``): faster still, no longer
+    bit for bit.
     With ``in_place`` the trace's final state is ``state`` itself, advanced (for a caller that
     made ``state`` for this call alone, as a planner's repeated copies: no copy is made).
     """
