@@ -188,12 +188,17 @@ class State:
         return self._each(lambda a: a.repeat(n, axis=0))
 
     @staticmethod
+    def fields() -> tuple[str, ...]:
+        """The names of the state's arrays in declaration order: the keys of a checkpoint
+        that stores a state array by array (the trainers, :mod:`pioneer.learn.layout_env`)."""
+        return _STATE_FIELDS
+
+    @staticmethod
     def concat(states: Sequence[State]) -> State:
         """One state holding every copy of ``states`` in order (B = ΣB_i, equal N)."""
         if not states:
             raise ConfigError(expect("State.concat", "at least one state", 0, "pass states"))
-        names = [f.name for f in dataclasses.fields(State)]
-        return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in names})
+        return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in _STATE_FIELDS})
 
     def put(self, index: int, single: State) -> None:
         """Overwrite copy ``index`` in place with the B = 1 state ``single`` (an episode that
