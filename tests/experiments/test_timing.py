@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from pioneer.experiments import timing
-from pioneer.experiments.reproduce import (
+from pioneer.experiments.reproduce_plan import (
     BASELINES,
     CLASSIC,
     PAPER_TEACHERS,

@@ -27,7 +27,8 @@ from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
 from pioneer.eval.report import metric_tables
 from pioneer.eval.tables import METRIC_SETS
-from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+from pioneer.experiments.reproduce import reproduce
+from pioneer.experiments.reproduce_plan import PROFILES, SCENARIOS
 from pioneer.interrupt import kept
 from pioneer.io import to_json
 from pioneer.seeds import SeedSet

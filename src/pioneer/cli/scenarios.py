@@ -15,7 +15,7 @@ from pioneer.cli._parse import config_flags
 from pioneer.cli._text import number
 from pioneer.config import default
 from pioneer.experiments.calibration import calibrate
-from pioneer.experiments.reproduce import SCENARIOS
+from pioneer.experiments.reproduce_plan import SCENARIOS
 from pioneer.io import inside, output_dir
 from pioneer.sim.scenarios.distribution import (
     MIN_PLACEMENT_RATE,

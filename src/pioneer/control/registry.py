@@ -29,10 +29,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from pioneer.config import check_parameters
 from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.io import file_record
+from pioneer.parameters import check_parameters
 
 __all__ = [
     "ENTRY_POINT_GROUP",

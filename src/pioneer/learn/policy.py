@@ -23,8 +23,8 @@ import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
+from pioneer.deploy.inputs import InputMemory
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
-from pioneer.deploy.runtime import InputMemory
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.inference import StudentInference
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
