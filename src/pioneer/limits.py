@@ -1,7 +1,7 @@
 """The robot's command limits, defined once for the simulator and the robot runtime.
 
 :class:`pioneer.sim.robot.RobotConfig` takes its defaults from here, and so does
-:class:`pioneer.deploy.runtime.RuntimeConfig`, which clips every command that leaves the
+:class:`pioneer.deploy.config.RuntimeConfig`, which clips every command that leaves the
 runtime; the runtime cannot import the simulator (it would load numba), so the numbers live in
 this dependency-free module rather than in either config, beside the one rule both configs
 check (:func:`check_speed_range`).

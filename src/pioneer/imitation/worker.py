@@ -7,14 +7,16 @@ and CrowdNav++'s imitation warm start (:mod:`pioneer.baselines.crowdnav.collect`
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.envs.policy import Decision, Planner
 from pioneer.imitation.store import file_version
-from pioneer.sim.world import World
+
+if TYPE_CHECKING:  # types only: a worker imports the simulator when it runs an episode
+    from pioneer.envs.policy import Decision, Planner
+    from pioneer.sim.world import World
 
 __all__ = ["LabelledDriver", "WorkerCache"]
 

@@ -68,7 +68,7 @@ class _Imitation(LabelledDriver):
         self, teacher: Any, net_cfg: CrowdNavConfig, model: CrowdNavNet | None, world: World
     ) -> None:
         super().__init__(teacher, "applied", world)
-        self.net_cfg, self.model = net_cfg, model
+        self.net_cfg, self.model, self.sim_world = net_cfg, model, world
         self.cols: dict[str, list[Any]] = {
             k: []
             for k in (
@@ -88,8 +88,7 @@ class _Imitation(LabelledDriver):
 
     def drive(self, obs: NDArray[np.float32], info: Mapping[str, Any], decision: Any) -> F64:
         s: State = info["state"]
-        world, net_cfg = self.world, self.net_cfg
-        assert world is not None  # given to __init__
+        world, net_cfg = self.sim_world, self.net_cfg
         sim = world.sim
         graph = build_observation(s, world, net_cfg)
         u_star = np.asarray(decision.command, np.float64)
