@@ -83,7 +83,7 @@ def bench_teacher_decision(plan: Plan) -> Result:
     decisions, their decisions along the episode, the observation, and the speed-ups (the
     median over rounds of reference ÷ other); and the rollout's 10 steps by the reference
     kernel, the lanes kernel (the same values) and the lanes with the vectorised e^x."""
-    from pioneer.control.precision import with_precision
+    from pioneer.control.precision_check import with_precision
     from pioneer.control.rollout import rollout
     from pioneer.control.teacher import LookaheadTeacher, make_teacher
     from pioneer.reward.features import feature_map
@@ -225,8 +225,8 @@ def bench_teacher_equivalence(plan: Plan) -> Result:
     suffix) and for the ``fast`` rollouts (float32 rays and the lanes' vectorised e^x: the
     ``_fast`` metrics), the share of states with the same candidate (target >= 99 %) and,
     where not, the reference-score loss of the other choice (target < the stated tolerance),
-    by :func:`pioneer.control.precision.compare_precision`."""
-    from pioneer.control.precision import (
+    by :func:`pioneer.control.precision_check.compare_precision`."""
+    from pioneer.control.precision_check import (
         MIN_SAME_SHARE,
         SCORE_TOLERANCE,
         compare_precision,

@@ -463,8 +463,8 @@ def _config(path: str) -> type[Config]:
         ("pioneer.baselines.cvar_bf.config.CvarBfConfig", {"max_iter": 0}, "max_iter"),
         ("pioneer.learn.models.StudentConfig", {"hidden": (128, 0)}, "hidden[1]"),
         ("pioneer.learn.models.StudentConfig", {"dropout": 1.0}, "dropout"),
-        ("pioneer.deploy.runtime.RuntimeConfig", {"unseen": "guess"}, "unseen"),
-        ("pioneer.deploy.runtime.RuntimeConfig", {"min_valid_share": 1.5}, "min_valid_share"),
+        ("pioneer.deploy.config.RuntimeConfig", {"unseen": "guess"}, "unseen"),
+        ("pioneer.deploy.config.RuntimeConfig", {"min_valid_share": 1.5}, "min_valid_share"),
     ],
 )
 def test_the_converted_configs_refuse_an_out_of_range_value_naming_the_field(path, kwargs, field):

@@ -21,7 +21,12 @@ WRITERS = {
     "pioneer.experiments.calibration",
     "pioneer.experiments.blind_sector",
 }
-READERS = {"pioneer.eval.report", "pioneer.experiments.reproduce", "pioneer.cli.evaluation"}  # help
+READERS = {  # cli.evaluation: its help
+    "pioneer.eval.report",
+    "pioneer.experiments.reproduce",
+    "pioneer.experiments.reproduce_report",
+    "pioneer.cli.evaluation",
+}
 
 
 def _docstrings(tree: ast.AST) -> set[int]:

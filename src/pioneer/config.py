@@ -33,8 +33,7 @@ import math
 import types
 import typing
 import weakref
-from collections.abc import Callable, Collection, Iterator, Mapping
-from pathlib import Path
+from collections.abc import Callable, Iterator, Mapping
 from typing import Annotated, Any, ClassVar, Self
 
 from pioneer.errors import ConfigError, expect
@@ -44,12 +43,13 @@ __all__ = [
     "Ordered",
     "check_nonnegative",
     "check_option_bounds",
-    "check_parameters",
     "check_positive",
     "check_range",
     "check_values",
     "check_within",
     "default",
+    "field_checks",
+    "without_none",
 ]
 
 
@@ -197,7 +197,7 @@ def _constraints(metadata: tuple[Any, ...]) -> Iterator[Any]:
             yield m
 
 
-def _without_none(hint: Any) -> tuple[Any, bool]:
+def without_none(hint: Any) -> tuple[Any, bool]:
     """``X | None`` → ``(X, True)``; anything else → ``(hint, False)``."""
     args = typing.get_args(hint)
     union = typing.get_origin(hint) in (typing.Union, types.UnionType)
@@ -256,16 +256,16 @@ class _Nested:
 _Check = _Bounds | _Choices | _Items | _Nested  # the checks of one field
 
 
-def _field_bounds(owner: str, name: str, hint: Any) -> _Check | None:
+def field_checks(owner: str, name: str, hint: Any) -> _Check | None:
     """The bounds (for a ``Literal``, the choices; for a tuple, its items' checks; for a
     config, its class) of one field from its resolved type hint, or ``None`` if it declares
     none."""
-    hint, optional = _without_none(hint)
+    hint, optional = without_none(hint)
     metadata: tuple[Any, ...] = ()
     if typing.get_origin(hint) is Annotated:
         hint, *extra = typing.get_args(hint)
         metadata = tuple(extra)
-        hint, none_inside = _without_none(hint)
+        hint, none_inside = without_none(hint)
         optional = optional or none_inside
     if typing.get_origin(hint) is typing.Literal:
         return _Choices(typing.get_args(hint), optional)
@@ -298,7 +298,7 @@ def _tuple_checks(
     """The checks of a tuple field (see :class:`_Items`), or ``None`` if it declares none."""
     args = typing.get_args(hint)
     variadic = len(args) == 2 and args[1] is Ellipsis
-    checks = tuple(_field_bounds(owner, name, a) for a in (args[:1] if variadic else args))
+    checks = tuple(field_checks(owner, name, a) for a in (args[:1] if variadic else args))
     kw: dict[str, Any] = {}
     if metadata:
         import annotated_types as at
@@ -331,8 +331,7 @@ def _bounds_of(cls: type) -> tuple[tuple[str, _Check], ...]:
         return _BOUNDS[cls]
     hints = typing.get_type_hints(cls, include_extras=True)
     found = (
-        (f.name, _field_bounds(cls.__name__, f.name, hints[f.name]))
-        for f in dataclasses.fields(cls)
+        (f.name, field_checks(cls.__name__, f.name, hints[f.name])) for f in dataclasses.fields(cls)
     )
     _BOUNDS[cls] = tuple((name, b) for name, b in found if b is not None)
     return _BOUNDS[cls]
@@ -463,7 +462,7 @@ def _plain(obj: Any) -> Any:
     return obj
 
 
-# ------------------------------------------------------------------ typed function parameters
+# ------------------------------------------------------------------ defaults
 def default(owner: Callable[..., object], name: str) -> Any:
     """The default of field or parameter ``name`` of ``owner`` (a config dataclass, a class or
     a function): a default is declared once, where the value is used, and read from there by a
@@ -479,87 +478,3 @@ def default(owner: Callable[..., object], name: str) -> Any:
         if param is not None and param.default is not inspect.Parameter.empty:
             return param.default
     raise TypeError(f"{getattr(owner, '__qualname__', owner)} declares no default for {name!r}")
-
-
-def _type_name(hint: Any) -> str:
-    hint, _ = _without_none(hint)
-    if typing.get_origin(hint) is Annotated:
-        hint = typing.get_args(hint)[0]
-    if typing.get_origin(hint) is typing.Literal:
-        return f"one of {list(typing.get_args(hint))}"
-    names = {bool: "true or false", int: "an integer", float: "a number", str: "a text"}
-    return names.get(hint, getattr(hint, "__name__", str(hint)))
-
-
-def _check_type(owner: str, name: str, hint: Any, value: Any) -> Any:
-    """``value`` checked against ``hint`` (bool, int, float, str, Path, Literal, ``| None``,
-    ``Annotated`` bounds); an int given for a float becomes a float. Other hints pass."""
-    bounds = _field_bounds(owner, name, hint)
-    base, optional = _without_none(hint)
-    if typing.get_origin(base) is Annotated:
-        base, none_inside = _without_none(typing.get_args(base)[0])
-        optional = optional or none_inside
-    if value is None:
-        if optional or type(None) in typing.get_args(base):
-            return None
-        raise ConfigError(expect(f"{owner}.{name}", _type_name(hint), None, f"give {name} a value"))
-    if typing.get_origin(base) in (typing.Union, types.UnionType):
-        options = typing.get_args(base)
-        if str in options or Path in options:
-            base = str
-        elif float in options:
-            base = float
-    ok = True
-    if typing.get_origin(base) is typing.Literal:
-        ok = value in typing.get_args(base)
-    elif base is bool:
-        ok = isinstance(value, bool)
-    elif base is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif base is float:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        value = float(value) if ok else value
-        ok = ok and math.isfinite(value)
-    elif base in (str, Path):
-        ok = isinstance(value, str)
-    if not ok:
-        raise ConfigError(
-            expect(f"{owner}.{name}", _type_name(hint), value, f"give {name} {_type_name(hint)}")
-        )
-    if bounds is not None:
-        bounds.check(owner, name, value)
-    return value
-
-
-def check_parameters(
-    owner: str, fn: Callable[..., Any], kwargs: dict[str, Any], fixed: Collection[str] = ()
-) -> dict[str, Any]:
-    """``kwargs`` checked against the parameters of ``fn`` (a function or a class): every key
-    must be a parameter, every value of its annotated type and within its ``Annotated``
-    bounds, and every parameter without a default given — by ``kwargs``, by the caller's
-    ``fixed`` names, or ``scenario`` (always passed by the caller). Returns the checked values
-    (ints given for floats as floats). A function taking ``**kwargs`` accepts any key (its
-    config checks them)."""
-    target = fn.__init__ if isinstance(fn, type) else fn  # type: ignore[misc]
-    params = inspect.signature(fn).parameters
-    given = {*kwargs, *fixed, "scenario"}
-    missing = [
-        p.name
-        for p in params.values()
-        if p.default is inspect.Parameter.empty
-        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-        and p.name not in given
-    ]
-    if missing:
-        example = ",".join(f"{k}=…" for k in missing)
-        raise ConfigError(expect(owner, f"a value for {missing}", "none", f"give {example}"))
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return dict(kwargs)
-    allowed = sorted(k for k in params if k != "scenario")
-    unknown = sorted(set(kwargs) - set(allowed))
-    if unknown:
-        raise ConfigError(
-            expect(f"{owner} parameters", f"keys among {allowed}", unknown, "correct the key")
-        )
-    hints = typing.get_type_hints(target, include_extras=True)
-    return {k: _check_type(owner, k, hints[k], v) if k in hints else v for k, v in kwargs.items()}

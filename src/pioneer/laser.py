@@ -149,7 +149,10 @@ def observation_names(cfg: LidarConfig | None = None) -> list[str]:
 
 def wrap_angles(a: NDArray[np.float64] | float) -> NDArray[np.float64]:
     """Angles [rad] wrapped to (−π, π]; the same arithmetic, bit for bit, as the simulator's
-    scalar :func:`pioneer.sim.robot.wrap_angle`."""
+    scalar :func:`pioneer.sim.robot.wrap_angle`.
+
+    A second copy on purpose: the robot runtime's light install has no numba (the binding
+    test: ``tests/test_laser.py::test_wrap_angles_equals_scalar_kernel``)."""
     r = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
     return np.where(r > -np.pi, r, np.pi)
 

@@ -14,8 +14,8 @@ from pioneer.cli import main
 from pioneer.learn.dagger import DaggerConfig
 from pioneer.learn.models import StudentConfig
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
-from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import DensityConfig
+from pioneer.reward.recipe import RewardRecipe
 from pioneer_testutils import assert_house_message, run_cli
 
 COMMANDS = [

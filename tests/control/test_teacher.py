@@ -22,8 +22,8 @@ from pioneer.control.teacher import (
 from pioneer.envs.env import NavEnv
 from pioneer.errors import ConfigError
 from pioneer.eval.episode import run_episode
-from pioneer.reward.default import default_reward
 from pioneer.reward.features import feature_map
+from pioneer.reward.recipe import default_reward
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.humans import ARRIVED, SocialForceConfig
 from pioneer.sim.scenarios import HumanSpec, Region, ScenarioConfig, get_scenario

@@ -44,7 +44,7 @@ import pytest
 
 from pioneer.control.rollout import rollout
 from pioneer.control.teacher import LookaheadTeacher, SoftMargins, TeacherConfig
-from pioneer.reward.default import default_reward
+from pioneer.reward.recipe import default_reward
 from pioneer.sim import get_scenario, sample_state, step
 
 if (_TESTS := str(Path(__file__).resolve().parents[1])) not in sys.path:

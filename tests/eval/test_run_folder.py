@@ -131,7 +131,7 @@ def test_the_same_settings_resume_however_they_are_written(tmp_path):
     """``dwa`` and ``dwa:n_v=7`` (its default) are the same row: resolved, not compared as
     typed; the second run only adds the new trial."""
     from pioneer.baselines.classic import DWAPolicy
-    from pioneer.cli._common import default
+    from pioneer.config import default
 
     out = tmp_path / "ev"
     assert main(_eval(out, "dwa")) == 0

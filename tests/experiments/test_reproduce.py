@@ -11,7 +11,7 @@ from pioneer.cli import main
 from pioneer.data import STUDENT_SEEDS
 from pioneer.eval.harness import read_records
 from pioneer.eval.metrics import RANGES
-from pioneer.experiments.reproduce import (
+from pioneer.experiments.reproduce_plan import (
     ARRIVING,
     BASELINES,
     CLASSIC,
@@ -132,8 +132,9 @@ def test_a_rerun_resumes_without_new_episodes(smoke: Path) -> None:
 
 def test_the_announcement_names_the_run_and_stays_one_short_line(tmp_path, capsys):
     import pioneer.experiments.reproduce as rep
+    from pioneer.experiments.reproduce_plan import PROFILES
 
-    rep._announce("smoke", rep.PROFILES["smoke"], ["goal", "teacher-paper"], tmp_path, workers=8)
+    rep._announce("smoke", PROFILES["smoke"], ["goal", "teacher-paper"], tmp_path, workers=8)
     line = capsys.readouterr().err.strip()
     assert line.startswith("pioneer reproduce --profile smoke: 4 episodes (0 done), expected ≈ ")
     assert "\n" not in line and len(line) < 300
@@ -141,7 +142,7 @@ def test_the_announcement_names_the_run_and_stays_one_short_line(tmp_path, capsy
 
 def test_the_report_says_where_the_time_went(smoke: Path) -> None:
     """Per row: episodes and summed run time; the paper's rows apart from the extra ones."""
-    from pioneer.experiments.reproduce import PAPER_ROWS
+    from pioneer.experiments.reproduce_plan import PAPER_ROWS
     from pioneer.experiments.timing import row_times
 
     recs = read_records(smoke / "eval" / "episodes.jsonl")

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from pioneer.experiments import timing
-from pioneer.experiments.reproduce import (
+from pioneer.experiments.reproduce_plan import (
     BASELINES,
     CLASSIC,
     PAPER_TEACHERS,
@@ -260,5 +260,5 @@ def test_the_jit_cache_is_found_where_numba_keeps_it(tmp_path, monkeypatch):
     index.parent.mkdir(parents=True)
     index.write_bytes(b"")
     assert not jit_cache_warm()  # the teacher's rollout kernel is compiled on its own
-    (index.parent / "lanes.trajectory_kernel_lanes-75.py311.nbi").write_bytes(b"")
+    (index.parent / "kernel_simd.trajectory_kernel_lanes-75.py311.nbi").write_bytes(b"")
     assert jit_cache_warm()

@@ -25,7 +25,7 @@ import pytest
 import torch
 
 import pioneer.learn.dagger as dagger
-import pioneer.reward.default as reward_default
+import pioneer.reward.recipe as reward_default
 from pioneer.cli import main
 from pioneer.control.teacher import Assumptions, SoftMargins, make_teacher
 from pioneer.envs.env import NavEnv
@@ -35,6 +35,7 @@ from pioneer.io import file_sha256
 from pioneer.learn import MDN, MLPStudent, load_student, make_student_policy, read_checkpoint_meta
 from pioneer.learn.collect import TARGET_CANDIDATES
 from pioneer.learn.dagger import DaggerConfig, DaggerResult, run_dagger, scenario_set, score_weights
+from pioneer.learn.dagger_folder import SCENARIO_FILE
 from pioneer.learn.models import StudentConfig
 from pioneer.seeds import DAGGER_BASE, TRAINING_BASE, dagger_seed, training_seed
 from pioneer.sim.scenarios import ScenarioConfig, StaticStudyLayout, static_study_scenario
@@ -789,7 +790,7 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, tmp_path):
     (e.g. an edited scenario file) cannot silently resume, and an older run without the
     record resumes and gets one."""
     res, _ = run_mdn
-    recorded = json.loads((res.out / dagger.SCENARIO_FILE).read_text())
+    recorded = json.loads((res.out / SCENARIO_FILE).read_text())
     assert recorded == json.loads(json.dumps(scenarios.get_scenario(TINY).to_dict()))
     out = tmp_path / "changed"
     shutil.copytree(res.out, out)
@@ -799,10 +800,10 @@ def test_a_changed_scenario_definition_is_refused_on_resume(run_mdn, tmp_path):
         with pytest.raises(ConfigError) as err:
             run_dagger(TINY_CFG, out, workers=1, progress=False)
     assert_house_message(str(err.value), TINY, "sim", "--out")
-    (out / dagger.SCENARIO_FILE).unlink()
+    (out / SCENARIO_FILE).unlink()
     again = run_dagger(TINY_CFG, out, workers=1, progress=False)  # its default reward
     assert again.curves == res.curves
-    assert json.loads((out / dagger.SCENARIO_FILE).read_text()) == recorded
+    assert json.loads((out / SCENARIO_FILE).read_text()) == recorded
 
 
 # ------------------------------------------------------------------------------ bad settings

@@ -14,8 +14,8 @@ from pioneer.errors import DataError
 from pioneer.learn import MDN, StudentConfig, save_student
 from pioneer.learn.policy import make_student_policy
 from pioneer.reward.dataset import Dataset
-from pioneer.reward.default import PLAIN_RECIPE, check_reward_fits, fit_reward
 from pioneer.reward.density import DensityReward
+from pioneer.reward.recipe import PLAIN_RECIPE, check_reward_fits, fit_reward
 from pioneer_testutils import assert_house_message, file_tree, one_error_line, wrong_width_onnx
 
 torch.set_num_threads(1)

@@ -30,7 +30,7 @@ from pioneer.learn import (
     train_student,
 )
 from pioneer.learn.shield import default_threshold
-from pioneer.reward.default import default_reward
+from pioneer.reward.recipe import default_reward
 from pioneer.sim.scenarios import static_study_scenario
 from pioneer.sim.world import SimConfig
 from pioneer_testutils import assert_house_message

@@ -12,7 +12,9 @@ import torch
 
 from pioneer.data import shipped_demos
 from pioneer.deploy import OnnxStudentPolicy
-from pioneer.deploy.runtime import InputMemory, RuntimeConfig, StudentInputs, StudentRuntime
+from pioneer.deploy.config import RuntimeConfig
+from pioneer.deploy.inputs import InputMemory, StudentInputs
+from pioneer.deploy.runtime import StudentRuntime
 from pioneer.envs.env import NavEnv
 from pioneer.envs.episode import Episode
 from pioneer.errors import DataError

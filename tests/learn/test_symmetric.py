@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pioneer.data import shipped_demos
+from pioneer.deploy.inputs import StudentInputs
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty, symmetric_mixture
-from pioneer.deploy.runtime import StudentInputs
 from pioneer.errors import ConfigError
 from pioneer.laser import LidarConfig, apply_mirror, mirror_map, mirror_observation
 from pioneer.learn import StudentConfig, export_onnx, load_student, save_student, train_student

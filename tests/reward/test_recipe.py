@@ -12,9 +12,9 @@ from pioneer.data import shipped_demos
 from pioneer.errors import DataError
 from pioneer.laser import mirror_observation
 from pioneer.reward.dataset import Dataset
-from pioneer.reward.default import MIRROR_OF, RewardRecipe, fit_reward
 from pioneer.reward.features import feature_map
 from pioneer.reward.grading import MIN_ABS_GAMMA, TIME_REF_S, graded_gamma
+from pioneer.reward.recipe import MIRROR_OF, RewardRecipe, fit_reward
 
 
 @pytest.fixture(scope="module")

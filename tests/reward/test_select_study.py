@@ -14,7 +14,7 @@ from pioneer.errors import DataError
 from pioneer.reward.dataset import Dataset
 from pioneer.reward.density import DensityConfig, DensityReward
 from pioneer.reward.features import feature_map
-from pioneer.reward.select import episode_split, select_length_scale
+from pioneer.reward.length_scale import episode_split, select_length_scale
 from pioneer.sim.scenarios import get_scenario
 from pioneer.stats import auroc
 

@@ -22,11 +22,11 @@ import sys
 import typing
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, cast
+from typing import Annotated, Any, NoReturn, Protocol, cast
 
 import tyro
 
-from pioneer.cli._common import Command, check_outputs
+from pioneer.cli._files import check_outputs
 from pioneer.cli._parse import one_line, parse, refuse
 from pioneer.config import check_option_bounds
 from pioneer.errors import PioneerError, expect, missing_dependency_line, os_error_line
@@ -34,6 +34,14 @@ from pioneer.interrupt import Interrupted, handle_signals
 from pioneer.io import naming_path
 
 __all__ = ["main"]
+
+
+class Command(Protocol):
+    """A parsed command: its options, and ``run`` to carry it out (returns the exit code)."""
+
+    def run(self) -> int:
+        """Do the work; a :class:`~pioneer.errors.PioneerError` becomes one line, exit 2."""
+        ...
 
 
 @dataclasses.dataclass(frozen=True)

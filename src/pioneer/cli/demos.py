@@ -7,16 +7,11 @@ from typing import Annotated
 
 import tyro
 
-from pioneer.cli._common import (
-    Flag,
-    OutFile,
-    Seed,
-    command_line,
-    config_flags,
-    default,
-    metavar,
-    optional,
-)
+from pioneer.cli._files import OutFile
+from pioneer.cli._options import Flag, Seed, metavar, optional
+from pioneer.cli._parse import config_flags
+from pioneer.cli._text import command_line
+from pioneer.config import default
 from pioneer.demos.generate import Demonstrator, Selection, generate
 from pioneer.demos.teleop import TeleopSession
 from pioneer.io import to_json

@@ -11,16 +11,9 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import tyro
 
-from pioneer.cli._common import (
-    Flag,
-    InFile,
-    InPath,
-    OutFile,
-    default,
-    metavar,
-    one_of,
-    optional,
-)
+from pioneer.cli._files import InFile, InPath, OutFile
+from pioneer.cli._options import Flag, metavar, one_of, optional
+from pioneer.config import default
 from pioneer.deploy.bag import GOAL_FRAMES, replay_bag
 from pioneer.deploy.mixture import ACTION_MODES
 from pioneer.io import to_json

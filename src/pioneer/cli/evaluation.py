@@ -8,27 +8,27 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeAlias
 
 import tyro
 
-from pioneer.cli._common import (
+from pioneer.cli._files import OutDir, Output
+from pioneer.cli._options import (
     Ablation,
     Ablations,
     Flag,
-    OutDir,
-    Output,
     Seed,
     Workers,
-    default,
     metavar,
-    number,
     one_of,
     optional,
     policy_spec,
     require_some,
 )
+from pioneer.cli._text import number
+from pioneer.config import default
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.harness import evaluate
 from pioneer.eval.report import metric_tables
 from pioneer.eval.tables import METRIC_SETS
-from pioneer.experiments.reproduce import PROFILES, SCENARIOS, reproduce
+from pioneer.experiments.reproduce import reproduce
+from pioneer.experiments.reproduce_plan import PROFILES, SCENARIOS
 from pioneer.interrupt import kept
 from pioneer.io import to_json
 from pioneer.seeds import SeedSet

@@ -3,7 +3,7 @@
 Their options are the configs they fill (``DaggerConfig`` with its ``StudentConfig``,
 ``PPOConfig``, ``WarmStartConfig``), nested as groups of flags: the flags, defaults, bounds and
 help come from the configs; other defaults are those of the function the options are passed to,
-read with :func:`~pioneer.cli._common.default`.
+read with :func:`~pioneer.config.default`.
 """
 
 from __future__ import annotations
@@ -17,21 +17,11 @@ from annotated_types import Ge
 from pioneer.baselines.crowdnav.imitation import WarmStartConfig
 from pioneer.baselines.crowdnav.ppo import PPOConfig, train_crowdnav
 from pioneer.baselines.sb3 import train_sb3_ppo
-from pioneer.cli._common import (
-    Flag,
-    Input,
-    OutDir,
-    Seed,
-    Workers,
-    command_line,
-    config_flags,
-    default,
-    flag_name,
-    metavar,
-    one_of,
-    optional,
-    require_some,
-)
+from pioneer.cli._files import Input, OutDir
+from pioneer.cli._options import Flag, Seed, Workers, metavar, one_of, optional, require_some
+from pioneer.cli._parse import config_flags, flag_name
+from pioneer.cli._text import command_line
+from pioneer.config import default
 from pioneer.control.teacher import Assumptions, Patience, SoftMargins
 from pioneer.errors import ConfigError, expect
 from pioneer.experiments.blind_sector import run_blind_sector_study

@@ -13,21 +13,15 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import tyro
 
-from pioneer.cli._common import (
-    Flag,
-    InFile,
-    Input,
-    OutDir,
-    OutFile,
-    config_flags,
-    optional,
-)
+from pioneer.cli._files import InFile, Input, OutDir, OutFile
+from pioneer.cli._options import Flag, optional
+from pioneer.cli._parse import config_flags
 from pioneer.data import DEMOS_DIR
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.io import to_json
-from pioneer.reward.default import RewardRecipe
 from pioneer.reward.density import DensityConfig
 from pioneer.reward.features import FEATURE_MAPS
+from pioneer.reward.recipe import RewardRecipe
 
 if TYPE_CHECKING:
     from pioneer.reward.density import DensityReward
@@ -69,9 +63,9 @@ class RewardFit:
     def run(self) -> int:
         """Fit (selecting l if asked) and save."""
         from pioneer.reward.dataset import Dataset
-        from pioneer.reward.default import fit_reward
         from pioneer.reward.features import default_feature_map, feature_map
-        from pioneer.reward.select import select_length_scale
+        from pioneer.reward.length_scale import select_length_scale
+        from pioneer.reward.recipe import fit_reward
 
         self._check_min_gamma()
         d = Dataset.load(self.demos)

@@ -9,22 +9,13 @@ from typing import TYPE_CHECKING, Annotated
 
 import tyro
 
-from pioneer.cli._common import (
-    Flag,
-    OutDir,
-    OutFile,
-    Output,
-    Seed,
-    Workers,
-    config_flags,
-    default,
-    metavar,
-    number,
-    optional,
-    require_some,
-)
+from pioneer.cli._files import OutDir, OutFile, Output
+from pioneer.cli._options import Flag, Seed, Workers, metavar, optional, require_some
+from pioneer.cli._parse import config_flags
+from pioneer.cli._text import number
+from pioneer.config import default
 from pioneer.experiments.calibration import calibrate
-from pioneer.experiments.reproduce import SCENARIOS
+from pioneer.experiments.reproduce_plan import SCENARIOS
 from pioneer.io import inside, output_dir
 from pioneer.sim.scenarios.distribution import (
     MIN_PLACEMENT_RATE,

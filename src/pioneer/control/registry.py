@@ -29,10 +29,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from pioneer.config import check_parameters
 from pioneer.envs.policy import Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.io import file_record
+from pioneer.parameters import check_parameters
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -60,7 +60,7 @@ class PolicyEntry:
     """A registered policy: its factory (``"module:attribute"`` or a callable), the keyword
     arguments fixed for this name, an optional light check of its parts, the pip extra whose
     packages the factory imports, and an optional function naming the files it loads when a
-    path parameter is unset (:mod:`pioneer.control.parts`)."""
+    path parameter is unset (:mod:`pioneer.control.policy_files`)."""
 
     name: str
     entry_point: str | Callable[..., Policy]
@@ -116,12 +116,11 @@ def _builtin(
 
 
 _TEACHER = "pioneer.control.teacher:make_teacher"
-_PARTS = "pioneer.data.parts"
-_OWN = "pioneer.control.parts"
+_OWN = "pioneer.control.policy_files"
 _TEACHER_PARTS = {"check": f"{_OWN}:check_teacher", "files": f"{_OWN}:teacher_files"}
-_STUDENT_PARTS = {"check": f"{_PARTS}:student", "files": f"{_OWN}:student_files"}
-_CROWDNAV_PARTS = {"check": f"{_PARTS}:crowdnav", "files": f"{_OWN}:crowdnav_files"}
-_SB3_PARTS = {"check": f"{_PARTS}:sb3", "files": f"{_OWN}:sb3_files"}
+_STUDENT_PARTS = {"check": f"{_OWN}:check_student", "files": f"{_OWN}:student_files"}
+_CROWDNAV_PARTS = {"check": f"{_OWN}:check_crowdnav", "files": f"{_OWN}:crowdnav_files"}
+_SB3_PARTS = {"check": f"{_OWN}:check_sb3", "files": f"{_OWN}:sb3_files"}
 # The paper's teacher (§IV-A.2): no soft margins, and a stop when no command is feasible.
 _PAPER_TEACHER: dict[str, Any] = {
     "human_margin": 0.0,

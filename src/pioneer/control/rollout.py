@@ -19,7 +19,7 @@ float32 beam loops in the observation of the rollout states (the observations, f
 either way, then differ in the last bits); ``"fast"``, the default, float32 beams and the
 social forces' exponentials by a vectorised e^x within 2 ulp of libm's (the rollouts then
 differ in the last bits too). The teacher's choice differs only where candidates nearly tie
-(:mod:`pioneer.control.precision` measures how often: in none of 2,153 recorded states).
+(:mod:`pioneer.control.precision_check` measures how often: in none of 2,153 recorded states).
 The simulator's own steps and observations always use the reference arithmetic.
 """
 

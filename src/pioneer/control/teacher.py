@@ -52,9 +52,9 @@ from pioneer.control.rollout import (
 )
 from pioneer.envs.policy import Decision
 from pioneer.limits import OMEGA_MAX
-from pioneer.reward.default import default_features, default_reward
 from pioneer.reward.density import DensityReward
 from pioneer.reward.features import feature_map
+from pioneer.reward.recipe import default_features, default_reward
 from pioneer.reward.rules import RuleWeights, combine, goal_term, obstacle_term
 from pioneer.sim.scenarios import DEFAULT_SCENARIO
 from pioneer.sim.world import State, World
@@ -182,7 +182,7 @@ class TeacherConfig(Config):
     human_model: HumanModel = HUMAN_MODEL  # how rollouts move the people
     # The rollouts' arithmetic: "fast" (float32 rays, vectorised e^x), "float32" (float32
     # rays) or "float64" (the reference); each checked against the reference by
-    # pioneer.control.precision.
+    # pioneer.control.precision_check.
     precision: RolloutPrecision = ROLLOUT_PRECISION
     smoothing: Annotated[float, Interval(gt=0.0, le=1.0)] = 0.5  # α_EMA
     safety_margin: NonNegative = 0.0  # [m] predicted human gap below this is infeasible
@@ -438,7 +438,7 @@ def make_teacher(
     the shipped demos; each term can be switched off (paper Table II); ``human_margin`` and
     ``wall_margin`` are its soft margins [m] and ``margin_tiers`` their steps
     (:class:`SoftMargins`); ``precision`` the rollouts' arithmetic (fast, the default; float32
-    rays; or float64, the reference: :mod:`pioneer.control.precision`); ``assume_radius``
+    rays; or float64, the reference: :mod:`pioneer.control.precision_check`); ``assume_radius``
     [m], ``assume_a_robot`` [m/s²] and ``assume_start_now`` what its predictions assume of
     every person (:class:`Assumptions`; beyond the paper); ``patience`` [s] how long it holds
     to its margins and learned term without progress (:class:`Patience`; 0: always, as the

@@ -6,11 +6,11 @@ the simulator: the light robot install (``runtime/``) has numpy and onnxruntime 
 """
 
 from pioneer.deploy.bag import replay_bag
+from pioneer.deploy.config import RuntimeConfig
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
 from pioneer.deploy.runtime import (
     STOP_REASONS,
     OnnxStudentPolicy,
-    RuntimeConfig,
     RuntimeDecision,
     StudentRuntime,
     make_onnx_student_policy,

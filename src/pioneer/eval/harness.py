@@ -28,9 +28,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import os
-import signal
-import threading
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
@@ -45,6 +42,7 @@ from pioneer.eval.manifest import (
     read_manifest,
     write_manifest,
 )
+from pioneer.eval.ray_backend import ray_stream
 from pioneer.eval.records import (
     append_record,
     check_seed_set,
@@ -312,104 +310,6 @@ def _local(
         yield from bounded_map(pool, run_task, tasks, 4 * workers)
 
 
-def _ray(
-    pairs: list[tuple[str, PolicySpec]], tasks: list[Task], address: str | None
-) -> Generator[Any, None, None]:
-    if address:
-        check_reachable(address)
-    try:
-        import ray
-    except ImportError as exc:
-        raise ConfigError(
-            expect(
-                "backend",
-                "ray installed",
-                "not installed",
-                "pip install 'pioneer-nav[distributed]'",
-            )
-        ) from exc
-    started = not ray.is_initialized()
-    if started:
-        _ray_init(ray, address)
-    from pioneer.sim.scenarios import SCENARIOS_ENV
-
-    files = os.environ.get(SCENARIOS_ENV)  # scenario files: the same paths on every node
-    remote: Any = ray.remote(run_task)
-    build: Any = ray.remote(build_check)
-    if files:
-        env = {"env_vars": {SCENARIOS_ENV: files}}
-        remote, build = (ray.remote(runtime_env=env)(f) for f in (run_task, build_check))
-    refs: list[Any] = []
-    try:
-        made = ray.get([build.remote(pair) for pair in pairs])
-        yield {(sc, spec.row): m for (sc, spec), m in zip(pairs, made, strict=True)}
-        refs = [remote.remote(t) for t in tasks]
-        while refs:
-            done, refs = ray.wait(refs, num_returns=1)
-            yield ray.get(done[0])
-    except BaseException:  # interrupted or abandoned: stop the tasks, and the Ray we started
-        for ref in refs:
-            ray.cancel(ref, force=True)
-        if started:
-            ray.shutdown()
-        raise
-
-
-RAY_CONNECT_TIMEOUT_S = 5.0  # [s] to open a TCP connection to a Ray cluster's address
-
-
-def check_reachable(address: str) -> None:
-    """Refuse, in one line naming it, a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``)
-    where nothing accepts a connection — before Ray retries it for minutes with pages of
-    warnings. ``auto``, ``local`` and other forms are left to Ray."""
-    import socket
-
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not host or not port.isdigit():
-        return
-    try:
-        with socket.create_connection((host.strip("[]"), int(port)), RAY_CONNECT_TIMEOUT_S):
-            pass
-    except OSError as exc:
-        why = exc.strerror or type(exc).__name__
-        raise ConfigError(
-            expect(
-                "--ray-address",
-                "the address of a running Ray cluster",
-                f"{address} ({why})",
-                "start the cluster (ray start --head) or fix the address; without "
-                "--ray-address a local Ray starts",
-            )
-        ) from exc
-
-
-def _ray_init(ray: Any, address: str | None) -> None:
-    """``ray.init``, keeping this process's SIGTERM handler (Ray sets its own, which exits
-    without the interruption's line); a cluster that cannot be joined is one line."""
-    import logging
-
-    main = threading.current_thread() is threading.main_thread()
-    handler = signal.getsignal(signal.SIGTERM) if main else None
-    try:
-        ray.init(
-            address=address,
-            include_dashboard=False,
-            log_to_driver=False,
-            logging_level=logging.ERROR,
-        )
-    except (ConnectionError, TimeoutError, RuntimeError) as exc:
-        raise ConfigError(
-            expect(
-                "--ray-address",
-                "a Ray cluster to join",
-                f"{address or 'a local Ray'} ({str(exc).splitlines()[0] if str(exc) else exc})",
-                "start the cluster (ray start --head) or fix the address",
-            )
-        ) from exc
-    if handler is not None:
-        signal.signal(signal.SIGTERM, handler)
-
-
 def _check_shipped_parts(scenarios: Sequence[str], policies: Sequence[PolicySpec]) -> None:
     """Fail before running anything when a policy would load a part the scenario does not
     have, or a given reward model that does not fit it — each registry entry's light check,
@@ -545,7 +445,11 @@ def evaluate(
     pairs = list(dict.fromkeys((t.scenario, t.policy) for t in every))
     todo: list[Task] = []  # filled under the folder's lock, once every policy is built
     n_workers = worker_count(workers)
-    stream = _ray(pairs, todo, ray_address) if backend == "ray" else _local(pairs, todo, n_workers)
+    stream = (
+        ray_stream(pairs, todo, ray_address, run_task, build_check)
+        if backend == "ray"
+        else _local(pairs, todo, n_workers)
+    )
     with (
         kept(lambda: f"{len(records)} of {total} episodes kept in {path}"),
         contextlib.closing(stream),  # its pool stops with the run, whatever stops the run

@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from pioneer.config import MAX_EPISODES, check_count, default
 from pioneer.data import shipped_student
-from pioneer.deploy.runtime import RuntimeConfig, StudentRuntime
+from pioneer.deploy.config import RuntimeConfig
+from pioneer.deploy.runtime import StudentRuntime
 from pioneer.errors import ConfigError, expect
 from pioneer.eval.episode import run_episode
 from pioneer.eval.harness import made_by_record

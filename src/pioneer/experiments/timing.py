@@ -162,7 +162,7 @@ def jit_cache_warm() -> bool:
 
     import pioneer.sim.kernel as kernel
 
-    patterns = ("kernel.step_kernel-*.nbi", "lanes.trajectory_kernel_lanes-*.nbi")
+    patterns = ("kernel.step_kernel-*.nbi", "kernel_simd.trajectory_kernel_lanes-*.nbi")
     cache_dir = str(getattr(config, "CACHE_DIR", "") or "")  # NUMBA_CACHE_DIR, read by numba
     if cache_dir:
         root = Path(cache_dir)

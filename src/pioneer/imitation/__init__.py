@@ -7,7 +7,8 @@ round by the model fitted on the aggregate of the rounds before it, and the expe
 every visited state. :mod:`.store` keeps a run on disk (one file per episode, written
 atomically, so a rerun resumes where it stopped, and the run's settings, so a rerun with other
 settings is refused); :mod:`.rounds` is the round loop, with the per-method parts passed in
-(how an episode is collected and labelled, what the aggregate is, how a model is fitted).
+(how an episode is collected and labelled, what the aggregate is, how a model is fitted);
+:mod:`.worker` what a collecting process shares (the expert-labelled driver, the cache).
 
 numpy only; the methods bring their own models.
 """

@@ -17,11 +17,11 @@ from pioneer.learn.models import (
     read_checkpoint_meta,
     save_student,
     select_action,
-    train_student,
     uncertainty,
 )
 from pioneer.learn.policy import StudentPolicy, make_student_policy
 from pioneer.learn.shield import ShieldPolicy, make_shield_policy
+from pioneer.learn.training import train_student
 
 __all__ = [
     "MDN",

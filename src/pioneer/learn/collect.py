@@ -1,7 +1,7 @@
 """DAgger's worker side: one labelled episode, driven by the teacher or the student, with the
 teacher labelling every step (:func:`collect_episode`), and one episode a round's student
 drives alone, for the choice among the rounds (:func:`drive_task`); the teacher and the
-round's student are cached per worker process."""
+round's student are cached per worker process (:mod:`pioneer.imitation.worker`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.imitation.store import file_version, save_episode
+from pioneer.imitation.store import save_episode
+from pioneer.imitation.worker import LabelledDriver, WorkerCache
 
 if TYPE_CHECKING:  # the teacher is imported in the worker, when it is first needed
     from pioneer.control.teacher import Assumptions, Patience, SoftMargins
@@ -26,7 +27,7 @@ __all__ = [
     "drive_task",
 ]
 
-_CACHE: dict[tuple[Any, ...], Any] = {}
+_CACHE = WorkerCache()
 # Candidates kept per frame for distilling the teacher's scores (beyond the paper): its best
 # TARGET_CANDIDATES by score, as the commands it would send for them and their scores.
 TARGET_CANDIDATES = 16
@@ -47,11 +48,10 @@ def _teacher(
 ) -> Any:
     # One teacher per reward file: it plans from the privileged state and world of each step,
     # so the variants of a layout distribution that share a reward share the teacher.
-    key = ("teacher", reward, margins, assume, patience)
-    if key not in _CACHE:
+    def make() -> Any:
         from pioneer.control.teacher import make_teacher
 
-        _CACHE[key] = make_teacher(
+        teacher = make_teacher(
             scenario,
             reward=reward,
             human_margin=margins.human,
@@ -62,45 +62,35 @@ def _teacher(
             assume_start_now=assume.start_now,
         )
         # the whole Patience (its progress step too), which make_teacher takes only as `after`
-        _CACHE[key].config = dataclasses.replace(_CACHE[key].config, patience=patience)
-    return _CACHE[key]
+        teacher.config = dataclasses.replace(teacher.config, patience=patience)
+        return teacher
+
+    return _CACHE.get(("teacher", reward, margins, assume, patience), make)
 
 
 def _student(checkpoint: str) -> Any:
-    path, mtime, size = file_version(checkpoint)  # a rewritten file (a recreated run) is new
-    key = ("student", f"{path}:{mtime}:{size}")
-    if key not in _CACHE:
-        from pioneer.learn.policy import make_student_policy
+    from pioneer.learn.policy import make_student_policy
 
-        for old in [k for k in _CACHE if k[0] == "student"]:  # keep only this round's student
-            del _CACHE[old]
-        _CACHE[key] = make_student_policy(checkpoint)
-    return _CACHE[key]
+    return _CACHE.latest("student", checkpoint, make_student_policy)
 
 
-class _Labelled:
-    """The driving policy (teacher or student) with the teacher labelling every step: ``act``
-    asks the teacher first (prev: the command actually applied, or its own last label), then
-    drives with that label or the student's command."""
+class _Labelled(LabelledDriver):
+    """The teacher labelling every step, driving itself or letting the student drive."""
+
+    name = "dagger"
 
     def __init__(self, teacher: Any, student: Any | None, label_prev: str) -> None:
-        self.teacher, self.student, self.label_prev = teacher, student, label_prev
-        self.name = "dagger"
-        self.label = np.zeros(2)
-        self.decision: Any = None
+        super().__init__(teacher, label_prev)
+        self.teacher, self.student = teacher, student
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         self.teacher.reset(info, rng)
         if self.student is not None:
             self.student.reset(info, rng)
 
-    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> NDArray[np.float64]:
-        state = info["state"]
-        prev = state.command[0] if self.label_prev == "applied" else None
-        self.decision = self.teacher.decide(info["world"], state, prev=prev)
-        self.label = self.decision.command
+    def drive(self, obs: NDArray[np.float32], info: Mapping[str, Any], decision: Any) -> Any:
         if self.student is None:
-            return np.asarray(self.label, dtype=np.float64)
+            return np.asarray(decision.command, dtype=np.float64)
         return np.asarray(self.student.act(obs, info), dtype=np.float64)
 
 
@@ -136,7 +126,7 @@ def collect_episode(
 
     def keep(step: Step) -> None:
         rows_obs.append(np.asarray(step.obs, dtype=np.float32))
-        rows_lab.append(driver.label)
+        rows_lab.append(driver.decision.command)
         rows_app.append(step.command)
         rows_clear.append(step.info["min_gap"])
         commands, scores = _score_targets(teacher, driver.decision)

@@ -50,24 +50,17 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
-import fnmatch
 import io
-import json
 import math
 import typing
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal, Self
+from typing import Any
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive
-from pioneer.config import MAX_EPISODES, Config, check_count
-from pioneer.control.teacher import Assumptions, Patience, SoftMargins
-from pioneer.data import base_scenario
-from pioneer.errors import ConfigError, expect
 from pioneer.imitation.rounds import Collector, Step, run_rounds
 from pioneer.imitation.rounds import one_thread as _worker_init
 from pioneer.imitation.store import RunFolder
@@ -75,112 +68,40 @@ from pioneer.interrupt import kept
 from pioneer.io import (
     atomic_path,
     file_sha256,
-    inside,
-    output_dir_kind,
     run_lock,
-    to_json,
     write_text_atomic,
 )
 from pioneer.laser import mirror_observation
 from pioneer.learn.collect import CollectTask, DriveTask, clear_cache, collect_episode
 from pioneer.learn.collect import collect_task as _collect_task
 from pioneer.learn.collect import drive_task as _drive_task
+from pioneer.learn.dagger_config import DaggerConfig
+from pioneer.learn.dagger_folder import (
+    FINAL_FILE,
+    check_inputs,
+    prepare,
+    round_sizes,
+    run_folder,
+    scenario_set,
+)
 from pioneer.learn.models import (
     MDN,
-    TRAIN_BATCH,
-    TRAIN_LR,
     Student,
-    StudentConfig,
     build_student,
     load_student,
     read_checkpoint_meta,
     save_student,
-    train_student,
 )
+from pioneer.learn.training import train_student
 from pioneer.parallel import worker_count
 from pioneer.progress import progress_bar
 from pioneer.seeds import dagger_seed, validation_seed
-from pioneer.sim.scenarios import DEFAULT_SCENARIO
 
 __all__ = ["DaggerConfig", "DaggerResult", "collect_episode", "run_dagger", "scenario_set"]
 
-SCENARIO_FILE = "scenario.json"
-FINAL_FILE = "student.safetensors"
 SELECTION_FILE = "selection.csv"
 SELECT_PURPOSE = "dagger-select"  # the validation seeds of the choice among rounds
 QUANTILES = (0.5, 0.9, 0.95, 0.99)
-
-
-LabelPrev = Literal["applied", "teacher"]
-# What the student learns from each frame: the teacher's command ("label", the paper) or its
-# scores of its best candidates ("scores", beyond the paper: docs/student.md)
-Target = Literal["label", "scores"]
-LABEL_PREV: tuple[str, ...] = typing.get_args(LabelPrev)
-
-
-@dataclasses.dataclass(frozen=True)
-class DaggerConfig(Config):
-    """A DAgger run (defaults = paper §V-B.2: 50 teacher episodes + 10 rounds × 50)."""
-
-    # hr-rl, hl-rr, … or a pattern such as general-* (one student for many worlds)
-    scenario: str = DEFAULT_SCENARIO
-    student: StudentConfig = StudentConfig()  # the student network
-    # u_{t−1} in the teacher's label ½u* + ½u_{t−1} on student-driven steps: "applied" (the
-    # command the robot actually ran) or "teacher" (the teacher's own previous label along the
-    # trajectory, as if its smoothing had been running; keeps the student's jitter out of the
-    # labels). Equal on teacher-driven steps.
-    label_prev: LabelPrev = "applied"
-    margins: SoftMargins = SoftMargins()  # the teacher's soft margins while it labels
-    # Beyond the paper: what the labelling teacher's predictions assume of every person in
-    # place of what the student cannot see (docs/notes/2026-11-24-general-student-recipes.md, "Which
-    # variation costs the student")
-    assume: Assumptions = Assumptions()
-    # Beyond the paper: how long the labelling teacher holds to its margins and learned term
-    # without progress (docs/teacher.md, "Patience")
-    patience: Patience = Patience()
-    teacher_episodes: Count = 50  # round 0, driven by the teacher
-    rounds: NonNegativeInt = 10  # student-driven rounds after round 0
-    episodes_per_round: Count = 50  # episodes of every later round
-    epochs_initial: Count = 40  # training epochs after round 0 (fresh network)
-    epochs_per_round: NonNegativeInt = 10  # epochs over the aggregate after each later round
-    batch: Count = TRAIN_BATCH  # frames per Adam step
-    lr: Positive = TRAIN_LR  # Adam learning rate
-    seed: NonNegativeInt = 0  # seeds the networks and the DAgger episodes
-    # Beyond the paper: frames whose gap to the nearest person (surface to surface, at
-    # decision time) is below near_gap count near_repeat times in training — the rare frames
-    # where the teacher's correction decides between a pass and a collision.
-    near_gap: NonNegative = 0.0  # [m] frames nearer a person than this count more (0: none)
-    near_repeat: Count = 1  # how many times such a frame counts in training
-    # Beyond the paper: validation episodes every round's student drives, the best becoming
-    # the run's student (0: the last round's, as in the paper)
-    select_episodes: NonNegativeInt = 0
-    # Beyond the paper: every frame also trains as its mirror image (the world mirrored x → −x:
-    # the observations by pioneer.laser.mirror_observation, ω of the label and of u_{t−1}
-    # negated), for a student that drives on both sides of the door
-    mirror: bool = False
-    # Beyond the paper: "scores" trains on the teacher's judgement, not only its choice — the
-    # commands it would send for its best candidates, weighted softmax(score / τ) — so the
-    # student learns which commands are nearly as good and which it must not give
-    target: Target = "label"
-    score_temperature: Positive = 0.05  # τ of target="scores" (score units; → 0: the label)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Self:
-        """Build from a plain dict, also in the layout of runs and checkpoints written before
-        the student's settings were nested (``student`` its kind, ``action_mode`` and
-        ``nll_beta`` beside it)."""
-        return super().from_dict(
-            _no_patience_before_patience(_one_tier_before_tiers(_nest_student(data)))
-        )
-
-    def episodes_in(self, rnd: int) -> int:
-        """Episodes collected in round ``rnd``."""
-        return self.teacher_episodes if rnd == 0 else self.episodes_per_round
-
-    @property
-    def total_episodes(self) -> int:
-        """Episodes of the whole run."""
-        return self.teacher_episodes + self.rounds * self.episodes_per_round
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,179 +113,6 @@ class DaggerResult:
     curves: list[dict[str, Any]]
     chosen: int  # the round whose student is ``student``
     selection: list[dict[str, Any]]  # every round's validation row (empty: no selection)
-
-
-# ------------------------------------------------------------------------------ run folder
-def _folder(out: Path) -> RunFolder:
-    """The run's episodes, rounds' students and settings (an older run's settings file is
-    read in today's layout, options added since at their defaults; a rerun may change the
-    number of rounds and of selection episodes)."""
-    return RunFolder(
-        out, FINAL_FILE, "DAgger", upgrade=_current_layout, free=("rounds", "select_episodes")
-    )
-
-
-def _current_layout(stored: dict[str, Any]) -> dict[str, Any]:
-    """Stored settings in today's layout: the DaggerConfig (:meth:`DaggerConfig.from_dict`)
-    and the reward's hash (none in a run stored before it was recorded, or of the default
-    reward)."""
-    config = {k: v for k, v in stored.items() if k != REWARD_KEY}
-    return {**DaggerConfig.from_dict(config).to_dict(), REWARD_KEY: stored.get(REWARD_KEY)}
-
-
-REWARD_KEY = "reward_sha256"  # the settings' key of the --reward file's hash
-
-
-def _settings(cfg: DaggerConfig, reward: str | Path | None) -> dict[str, Any]:
-    """What a run is made with and a resume must match: the DaggerConfig and the SHA-256 of
-    the teacher's ``reward`` file (None: the default, fitted on the shipped demos and kept in
-    the run folder) — the remaining episodes are never labelled under another reward."""
-    return {**cfg.to_dict(), REWARD_KEY: file_sha256(reward) if reward is not None else None}
-
-
-def _sizes(cfg: DaggerConfig) -> list[int]:
-    """Episodes of each round."""
-    return [cfg.episodes_in(r) for r in range(cfg.rounds + 1)]
-
-
-def _nest_student(data: Any) -> Any:
-    """``data`` (a DaggerConfig as a dict) in the current layout: the flat ``student`` (its
-    kind), ``action_mode`` and ``nll_beta`` of older runs moved into ``student``."""
-    if not isinstance(data, dict) or isinstance(data.get("student"), dict):
-        return data
-    flat = {"student": "kind", "action_mode": "action_mode", "nll_beta": "nll_beta"}
-    student = {new: data[old] for old, new in flat.items() if old in data}
-    rest = {k: v for k, v in data.items() if k not in flat}
-    return {**rest, "student": student} if student else rest
-
-
-def _one_tier_before_tiers(data: Any) -> Any:
-    """``data`` with ``margins.tiers = 1`` where its margins have no ``tiers``: runs stored
-    before the tiers were labelled by a teacher with one tier, and resume as such (or are
-    refused for another setting), not with today's default."""
-    margins = data.get("margins") if isinstance(data, dict) else None
-    if not isinstance(margins, dict) or "tiers" in margins:
-        return data
-    return {**data, "margins": {**margins, "tiers": 1}}
-
-
-def _no_patience_before_patience(data: Any) -> Any:
-    """``data`` with ``patience.after = 0`` where it has no ``patience``: runs stored before
-    the teacher had patience were labelled by a teacher without it, and resume as such."""
-    if not isinstance(data, dict) or "patience" in data or "scenario" not in data:
-        return data
-    return {**data, "patience": {"after": 0.0}}
-
-
-def scenario_set(pattern: str) -> list[str]:
-    """The scenarios a run draws its episodes from: ``pattern`` itself, or — with ``*``, ``?``
-    or ``[`` in it — every registered scenario whose name matches (e.g. ``general-*`` for the
-    layouts of ``pioneer sample-layouts``), sorted."""
-    from pioneer.sim.scenarios import get_scenario, scenario_names
-
-    if not any(ch in pattern for ch in "*?["):
-        get_scenario(pattern)  # fail early on an unknown scenario
-        return [pattern]
-    names = sorted(n for n in scenario_names() if fnmatch.fnmatchcase(n, pattern))
-    if not names:
-        raise ConfigError(
-            expect(
-                "DAgger --scenario pattern",
-                "a pattern matching registered scenarios",
-                pattern,
-                "load the variants with `pioneer --scenarios FILE distill …`",
-            )
-        )
-    return names
-
-
-def _check_scenario(out: Path, names: list[str]) -> dict[str, Any] | None:
-    """The scenarios' full definitions to record, if ``out`` has none yet; a resumed run must
-    see the same ones (reads only)."""
-    from pioneer.sim.scenarios import pin_scenario
-
-    p = out / SCENARIO_FILE
-    recorded = json.loads(p.read_text()) if p.exists() else None
-    if len(names) == 1:  # one scenario: its definition (as every run before patterns)
-        mine = pin_scenario(names[0], recorded, str(out))
-    else:
-        old = recorded.get("scenarios", {}) if isinstance(recorded, dict) else {}
-        if recorded is not None and sorted(old) != names:
-            raise ConfigError(
-                expect(
-                    f"{out}: scenarios",
-                    f"the {len(old)} of the run already there",
-                    f"{len(names)} matching now",
-                    "load the same scenario file to resume, or use a new --out directory",
-                )
-            )
-        mine = {"scenarios": {n: pin_scenario(n, old.get(n), str(out)) for n in names}}
-    return mine if recorded is None else None
-
-
-def _check_inputs(cfg: DaggerConfig, out: Path, reward: str | Path | None) -> list[str]:
-    """The run's scenarios, after checking every input against them and ``out`` (reads only,
-    so a refused run leaves the file system as it was): the reward file loads and fits each
-    scenario, or the default reward each needs can be fitted (on its base's shipped demos);
-    a resumed run has the same settings and scenario definitions."""
-    from pioneer.reward.default import check_reward_fits, default_reward
-    from pioneer.reward.density import DensityReward
-
-    check_count(
-        "DAgger episodes (--teacher-episodes + --rounds × --episodes-per-round)",
-        cfg.total_episodes,
-        MAX_EPISODES,
-        "ask for fewer rounds or episodes",
-    )
-    names = scenario_set(cfg.scenario)
-    output_dir_kind(out)
-    folder = _folder(out)
-    folder.check(_settings(cfg, reward))
-    folder.check_episodes(_sizes(cfg))  # a corrupt episode is refused before any new one
-    _check_scenario(out, names)
-    if reward is not None:
-        model = DensityReward.load(reward)
-        for name in names:
-            check_reward_fits(model, name, str(reward))
-    else:
-        for name, path in _default_reward_paths(out, names).items():
-            if not path.exists():
-                default_reward(base_scenario(name))  # cached: _prepare saves this very fit
-    return names
-
-
-def _default_reward_paths(out: Path, names: list[str]) -> dict[str, Path]:
-    """Where the default reward of each scenario's base is kept: ``DIR/reward.npz`` for one
-    scenario, ``DIR/reward-BASE.npz`` for a pattern."""
-    return {
-        name: inside(out, "reward.npz" if len(names) == 1 else f"reward-{base_scenario(name)}.npz")
-        for name in names
-    }
-
-
-def _prepare(
-    cfg: DaggerConfig, out: Path, reward: str | Path | None, names: list[str]
-) -> dict[str, Path]:
-    """Record the run's settings and scenarios in ``out`` (holding its lock; checked by
-    :func:`_check_inputs`) and return the teacher's reward file per scenario: ``reward`` for
-    all, else the one fitted on the shipped demos of the scenario's base
-    (:func:`_default_reward_paths`)."""
-    folder = _folder(out)
-    settings = _settings(cfg, reward)
-    folder.check(settings)  # again, holding the lock
-    scenarios = _check_scenario(out, names)
-    folder.prepare(settings)  # a killed worker's half-written episode goes
-    if scenarios is not None:
-        write_text_atomic(out / SCENARIO_FILE, to_json(scenarios, indent=1) + "\n")
-    if reward is not None:
-        return dict.fromkeys(names, Path(reward))
-    from pioneer.reward.default import default_reward
-
-    paths = _default_reward_paths(out, names)
-    for name, path in paths.items():
-        if not path.exists():
-            default_reward(base_scenario(name)).save(path)
-    return paths
 
 
 # ------------------------------------------------------------------------------ the method
@@ -561,9 +309,9 @@ def run_dagger(
     demonstrations of the scenario (saved to ``DIR/reward.npz``).
     """
     out = Path(out_dir)
-    names = _check_inputs(config, out, reward)
+    names = check_inputs(config, out, reward)
     with run_lock(out):
-        return _run(config, out, workers, _prepare(config, out, reward, names), progress, on_round)
+        return _run(config, out, workers, prepare(config, out, reward, names), progress, on_round)
 
 
 def _run(
@@ -579,7 +327,7 @@ def _run(
     # depend on --workers or the machine (the networks are small; threads gain little).
     torch.set_num_threads(1)
     clear_cache()
-    folder, sizes = _folder(out), _sizes(cfg)
+    folder, sizes = run_folder(out), round_sizes(cfg)
     curves: list[dict[str, Any]] = []
     bar = progress_bar(
         total=cfg.total_episodes,

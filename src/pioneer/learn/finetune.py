@@ -119,7 +119,7 @@ def finetune_student(
     ``True`` requires it, ``False`` refuses it. Every input is checked before ``out`` is
     created; one run writes to ``out`` at a time (:func:`pioneer.io.run_lock`).
     """
-    from pioneer.learn.dagger import scenario_set
+    from pioneer.learn.dagger_folder import scenario_set
 
     cfg = config or FinetuneConfig()
     if not scenarios:

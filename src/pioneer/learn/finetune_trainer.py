@@ -20,12 +20,17 @@ from torch import nn
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
 from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
-from pioneer.io import atomic_path
 from pioneer.learn.layout_env import LayoutEnvs, privileged_width
 from pioneer.learn.models import Student
-from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
+from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
 from pioneer.nn.layers import seeded_linear
-from pioneer.nn.ppo import clipped_surrogate, compute_gae, window_row
+from pioneer.nn.ppo import (
+    clipped_surrogate,
+    compute_gae,
+    progress_state,
+    restore_progress,
+    window_row,
+)
 from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer.sim.events import Event
 
@@ -284,39 +289,26 @@ class FinetuneTrainer:
 
     def save(self, path: Path, settings: dict[str, Any]) -> None:
         """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
-        from safetensors.torch import save
-
-        tensors: dict[str, torch.Tensor] = {}
-        for prefix, module in (("actor", self.actor), ("ref", self.ref), ("critic", self.critic)):
-            for k, v in module.state_dict().items():
-                tensors[f"{prefix}/{k}"] = v.detach().clone().contiguous()
-        tensors["log_std"] = self.log_std.detach().clone()
-        osd, cosd = self.opt.state_dict(), self.critic_opt.state_dict()
-        tensors.update(optimizer_tensors(osd, "optim"))
-        tensors.update(optimizer_tensors(cosd, "critic_optim"))
-        for k, a in self.envs.arrays().items():
-            tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(a).copy())
-        tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
-        tensors["curve"] = torch.tensor(self.curve, dtype=torch.float64).reshape(
-            -1, len(CURVE_COLUMNS)
-        )
-        tensors["window/return"] = torch.tensor(self.win_return, dtype=torch.float64)
-        tensors["window/event"] = torch.tensor(self.win_event, dtype=torch.int64)
-        tensors["rng/torch"] = self.gen.get_state()
-        counters: dict[str, float] = {"update": self.update, "env_steps": self.env_steps}
-        counters |= {"episodes": self.episodes, "wall_time_s": self.wall}
-        meta = {
-            "format": TRAIN_FORMAT,
-            "settings": json.dumps(settings),
-            "param_groups": json.dumps(osd["param_groups"]),
-            "critic_param_groups": json.dumps(cosd["param_groups"]),
-            "counters": json.dumps(counters),
-            "rng_numpy": json.dumps(self.rng.bit_generator.state),
-            "envs": json.dumps(self.envs.meta()),
-            "torch": torch.__version__,
+        tensors = {
+            f"env/{k}": torch.from_numpy(np.ascontiguousarray(a).copy())
+            for k, a in self.envs.arrays().items()
         }
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(save(tensors, metadata=meta))
+        tensors["log_std"] = self.log_std.detach().clone()
+        tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
+        progress, meta = progress_state(self, len(CURVE_COLUMNS))
+        tensors.update(progress)
+        write_training_state(
+            path,
+            TRAIN_FORMAT,
+            modules={"actor": self.actor, "ref": self.ref, "critic": self.critic},
+            optimizers={"optim": self.opt, "critic_optim": self.critic_opt},
+            tensors=tensors,
+            meta={
+                "settings": settings,
+                **meta,
+                "envs": self.envs.meta(),
+            },
+        )
 
     def load(self, path: Path, settings: dict[str, Any]) -> None:
         """Restore the state :meth:`save` wrote (its settings must be ``settings``)."""
@@ -338,17 +330,9 @@ class FinetuneTrainer:
             module.load_state_dict(sd, strict=True)
         with torch.no_grad():
             self.log_std.copy_(t["log_std"])
-        self.opt.load_state_dict(optimizer_state(t, "optim", json.loads(meta["param_groups"])))
-        groups = json.loads(meta["critic_param_groups"])
-        self.critic_opt.load_state_dict(optimizer_state(t, "critic_optim", groups))
+        restore_optimizer(self.opt, t, meta, "optim")
+        restore_optimizer(self.critic_opt, t, meta, "critic_optim")
         env = {k[4:]: v.numpy() for k, v in t.items() if k.startswith("env/")}
         self.envs.restore(env, json.loads(meta["envs"]))
         self.ep_return = t["train/ep_return"].numpy().copy()
-        self.curve = t["curve"].tolist()
-        self.win_return = t["window/return"].tolist()
-        self.win_event = [int(x) for x in t["window/event"].tolist()]
-        self.gen.set_state(t["rng/torch"])
-        self.rng.bit_generator.state = json.loads(meta["rng_numpy"])
-        c = json.loads(meta["counters"])
-        self.update, self.env_steps = int(c["update"]), int(c["env_steps"])
-        self.episodes, self.wall = int(c["episodes"]), float(c["wall_time_s"])
+        restore_progress(self, t, meta)

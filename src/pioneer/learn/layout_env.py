@@ -19,14 +19,13 @@ which the deployed student never sees.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pioneer.deploy.runtime import StudentInputs
+from pioneer.deploy.inputs import StudentInputs
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.seeds import finetune_seed
 from pioneer.sim.events import Event, classify
@@ -41,7 +40,6 @@ ROBOT_FEATURES = 6  # t / T, goal (x, y) in the robot's frame, its distance, (v,
 # per person slot: position and velocity in the robot's frame, radius, present, not yet
 # walking (t < its delay), reacts to the robot
 HUMAN_FEATURES = 8
-_FIELDS = tuple(f.name for f in dataclasses.fields(State))
 
 
 def privileged_width(max_humans: int) -> int:
@@ -226,7 +224,7 @@ class LayoutEnvs:
             "prev_cmd": self.prev_cmd,
         }
         for g, grp in enumerate(self.groups):
-            for k in _FIELDS:
+            for k in State.fields():
                 out[f"group{g}/{k}"] = getattr(grp.state, k)
         return out
 
@@ -246,7 +244,7 @@ class LayoutEnvs:
         self.episode_count = int(meta["episode_count"])
         self.failure = {str(k): float(v) for k, v in meta.get("failure", {}).items()}
         for g, name in enumerate(meta["layouts"]):
-            state = State(**{k: arrays[f"group{g}/{k}"].copy() for k in _FIELDS})
+            state = State(**{k: arrays[f"group{g}/{k}"].copy() for k in State.fields()})
             rng = np.random.default_rng()
             rng.bit_generator.state = meta["lidar_rngs"][g]
             self.groups[g] = _Group(name, state, rng)

@@ -1,11 +1,12 @@
-"""Student networks distilled from the teacher: MDN and MLP, training and checkpoints (paper §IV-B).
+"""Student networks distilled from the teacher: MDN and MLP, and their checkpoints (paper §IV-B).
 
 - :class:`MDN`: 29 → 128 → 128 (ReLU, dropout 0.1) → K = 10 diagonal Gaussian components:
   mixture logits (softmax), means and standard deviations (softplus + floor); loss = negative
   log-likelihood of the mixture (paper §IV-B; Choi et al., ICRA 2018).
 - :class:`MLPStudent`: the same trunk with 2 outputs and a mean-squared-error loss (baseline).
 - :func:`uncertainty`: the law-of-total-variance split into aleatoric and epistemic parts.
-- :func:`train_student`: Adam, lr 1e−3, batch 256, seeded; returns the loss history.
+- :func:`pioneer.learn.training.train_student`: Adam, lr 1e−3, batch 256, seeded; returns the
+  loss history.
 - :func:`save_student` / :func:`load_student`: safetensors weights with the config as JSON in
   the file's metadata — a checkpoint rebuilds its own model and cannot execute code.
 
@@ -38,19 +39,18 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from annotated_types import Interval, MinLen
-from numpy.typing import NDArray
 from torch import nn
 
 from pioneer.bounds import Count, NonNegative, UnitInterval
 from pioneer.config import Config, default
+from pioneer.deploy.inputs import StudentInputs
 from pioneer.deploy.mixture import (
     ACTION_MODES,
     MIRROR_ACTION,
@@ -58,8 +58,7 @@ from pioneer.deploy.mixture import (
     mixture_action,
     mixture_uncertainty,
 )
-from pioneer.deploy.runtime import StudentInputs
-from pioneer.errors import ConfigError, DataError, expect
+from pioneer.errors import ConfigError, expect
 from pioneer.nn.checkpoint import load_checked, read_checkpoint, stored_config, write_checkpoint
 from pioneer.nn.layers import seeded_linear
 from pioneer.sim.lidar import OBS_DIM
@@ -79,14 +78,11 @@ __all__ = [
     "save_student",
     "select_action",
     "symmetrise_mixture",
-    "train_student",
     "uncertainty",
 ]
 
 ACTION_DIM = 2  # (v [m/s], ω [rad/s])
 CHECKPOINT_FORMAT = "pioneer.student/1"
-TRAIN_BATCH = 256  # frames per Adam step (paper §V-B.2)
-TRAIN_LR = 1e-3  # Adam learning rate (paper §V-B.2)
 StudentKind = Literal["mdn", "mlp"]
 KINDS: tuple[str, ...] = typing.get_args(StudentKind)
 
@@ -395,105 +391,6 @@ def build_student(config: StudentConfig | None = None, seed: int = 0) -> MDN | M
     """A freshly initialised student of ``config.kind`` (default: the paper's MDN, §V-B.2)."""
     cfg = config or StudentConfig()
     return MDN(cfg, seed) if cfg.kind == "mdn" else MLPStudent(cfg, seed)
-
-
-# ---------------------------------------------------------------------------------- training
-def _as_tensor(x: NDArray[np.floating] | torch.Tensor, name: str, cols: int) -> torch.Tensor:
-    t = torch.as_tensor(np.asarray(x, dtype=np.float32) if not torch.is_tensor(x) else x)
-    t = t.to(torch.float32)
-    if t.ndim != 2 or t.shape[1] != cols or t.shape[0] < 1:
-        raise DataError(expect(name, f"shape (N >= 1, {cols})", tuple(t.shape), "fix the data"))
-    if not bool(torch.isfinite(t).all()):
-        raise DataError(expect(name, "finite values", "NaN or inf", "drop or fix those rows"))
-    return t
-
-
-def _as_targets(
-    targets: tuple[NDArray[np.floating], NDArray[np.floating]], n: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    commands = torch.as_tensor(np.asarray(targets[0], dtype=np.float32))
-    weights = torch.as_tensor(np.asarray(targets[1], dtype=np.float32))
-    k = weights.shape[-1] if weights.ndim == 2 else -1
-    if commands.shape != (n, k, ACTION_DIM) or weights.shape != (n, k):
-        got = (tuple(commands.shape), tuple(weights.shape))
-        raise DataError(expect("targets", f"shapes ({n}, k, 2) and ({n}, k)", got, "align them"))
-    ok = torch.isfinite(commands).all() and torch.isfinite(weights).all()
-    if not bool(ok) or bool((weights < 0).any()):
-        raise DataError(expect("targets", "finite commands, weights >= 0", "other", "fix them"))
-    return commands, weights
-
-
-def train_student(
-    model: Student,
-    obs: NDArray[np.floating] | torch.Tensor,
-    actions: NDArray[np.floating] | torch.Tensor,
-    epochs: int = 50,
-    batch: int = TRAIN_BATCH,
-    lr: float = TRAIN_LR,
-    seed: int = 0,
-    progress: Callable[[int, float], None] | None = None,
-    fit_normalizer: bool = True,
-    targets: tuple[NDArray[np.floating], NDArray[np.floating]] | None = None,
-) -> list[float]:
-    """Fit ``model`` to ``(obs (N, input_dim), actions (N, 2))`` with Adam; returns the mean
-    training loss of each epoch (NLL [nats] for the MDN, standardised MSE for the MLP).
-
-    ``targets`` = ``(commands (N, k, 2), weights (N, k))`` trains on weighted targets instead
-    (:meth:`Student.target_loss`: the teacher's scores distilled); ``actions`` still set the
-    output standardisation.
-
-    ``fit_normalizer`` first sets the standardisation buffers from this data (DAgger retrains
-    on the aggregated set each round, so the scales follow the data). Mini-batches are drawn
-    without replacement from a ``torch.Generator`` seeded by ``seed``; dropout runs under a
-    forked torch RNG seeded by ``seed``, so the same call gives the same weights and the
-    caller's RNG state is left untouched. ``progress(epoch, loss)`` is called after each epoch.
-    The model is left in eval mode (dropout off).
-    """
-    x = _as_tensor(obs, "obs", model.config.input_dim)
-    y = _as_tensor(actions, "actions", ACTION_DIM)
-    if x.shape[0] != y.shape[0]:
-        raise DataError(
-            expect("obs/actions", "the same number of rows", (x.shape[0], y.shape[0]), "align")
-        )
-    for name, value in (("epochs", epochs), ("batch", batch)):
-        if not (isinstance(value, int) and value >= 1):
-            raise ConfigError(expect(name, "an integer >= 1", value, f"set {name} >= 1"))
-    if not (math.isfinite(lr) and lr > 0):
-        raise ConfigError(expect("lr", "a finite number > 0", lr, f"use {TRAIN_LR:g}"))
-    target = None if targets is None else _as_targets(targets, x.shape[0])
-    if fit_normalizer:
-        model.set_normalizer(x, y)
-    n = x.shape[0]
-    gen = torch.Generator().manual_seed(int(seed))
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    history: list[float] = []
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(int(seed))
-        model.train()
-        try:
-            for epoch in range(epochs):
-                perm = torch.randperm(n, generator=gen)
-                total = 0.0
-                for start in range(0, n, batch):
-                    idx = perm[start : start + batch]
-                    if target is None:
-                        loss = model.loss(x[idx], y[idx])
-                    else:
-                        loss = model.target_loss(x[idx], target[0][idx], target[1][idx])
-                    opt.zero_grad(set_to_none=True)
-                    loss.backward()
-                    opt.step()
-                    total += float(loss.detach()) * idx.shape[0]
-                history.append(total / n)
-                if not math.isfinite(history[-1]):
-                    raise DataError(
-                        expect("training loss", "finite", history[-1], "check the data scales")
-                    )
-                if progress is not None:
-                    progress(epoch, history[-1])
-        finally:
-            model.eval()
-    return history
 
 
 # ---------------------------------------------------------------------------------- checkpoints

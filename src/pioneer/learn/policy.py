@@ -23,12 +23,12 @@ import torch
 from annotated_types import Ge
 from numpy.typing import NDArray
 
+from pioneer.deploy.inputs import InputMemory
 from pioneer.deploy.mixture import mixture_action, mixture_uncertainty
-from pioneer.deploy.runtime import InputMemory
 from pioneer.errors import ConfigError, DataError, expect
 from pioneer.learn.inference import StudentInference
 from pioneer.learn.models import MDN, Student, load_student, select_action, uncertainty
-from pioneer.nn.forward import FORWARD, Forward, check_forward
+from pioneer.nn.forward_choice import FORWARD, Forward, check_forward
 
 __all__ = ["StudentPolicy", "make_student_policy"]
 
@@ -43,7 +43,7 @@ class StudentPolicy:
     ``reset`` clears it. A student that also reads o_{t−1} or u_{t−1}
     (:class:`~pioneer.deploy.runtime.StudentInputs`) remembers them as the ONNX runtime does:
     the observation it decided on and the command it sent, clipped to the robot's limits.
-    ``forward``: who computes the network's step (:mod:`pioneer.nn.forward`).
+    ``forward``: who computes the network's step (:mod:`pioneer.nn.forward_choice`).
     """
 
     def __init__(

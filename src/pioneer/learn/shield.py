@@ -37,7 +37,7 @@ from pioneer.envs.policy import Planner, Policy
 from pioneer.errors import ConfigError, expect
 from pioneer.learn.models import read_checkpoint_meta
 from pioneer.learn.policy import StudentPolicy, make_student_policy
-from pioneer.nn.forward import FORWARD, Forward
+from pioneer.nn.forward_choice import FORWARD, Forward
 
 __all__ = ["ShieldPolicy", "make_shield_policy"]
 
@@ -166,7 +166,7 @@ def make_shield_policy(
     forward: Forward = FORWARD,
 ) -> ShieldPolicy:
     """Policy factory: an MDN student (default: the shipped one of ``scenario``; ``forward``:
-    its network's step, :mod:`pioneer.nn.forward`) shielded by ``fallback`` (a
+    its network's step, :mod:`pioneer.nn.forward_choice`) shielded by ``fallback`` (a
     registered policy name; the teacher gets ``reward`` if given)."""
     student = make_student_policy(checkpoint, scenario=scenario, kind="mdn", forward=forward)
     assert student.checkpoint is not None

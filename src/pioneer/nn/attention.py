@@ -34,7 +34,7 @@ import torch
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["node_attention", "pool_attention"]
+__all__ = ["masked_softmax", "node_attention", "pool_attention"]
 
 F = NDArray[np.floating]
 B = NDArray[np.bool_]
@@ -60,6 +60,20 @@ def _softmax_row(scores: F, keep: B, zero: Any, out: F) -> None:  # pragma: no c
     if total > zero:
         for j in range(n):
             out[j] = out[j] / total
+
+
+def masked_softmax(scores: NDArray[np.float32], mask: B) -> NDArray[np.float32]:
+    """The softmax of :func:`_softmax_row` over the last axis of ``scores`` in NumPy, masked
+    by ``mask`` (broadcast against ``scores``): masked entries exactly 0, a row with no
+    unmasked entry all zeros. A second copy on purpose: CrowdNav++'s acting step at a batch
+    of one (:mod:`pioneer.baselines.crowdnav.inference`) is faster as NumPy calls than as a
+    compiled loop per call; ``tests/nn/test_attention.py`` binds the two to float32 rounding."""
+    s = np.where(mask, scores, np.float32(-np.inf))
+    top = s.max(axis=-1, keepdims=True)
+    top = np.where(np.isfinite(top), top, np.float32(0.0))
+    e = np.exp(s - top) * mask
+    out: NDArray[np.float32] = e / np.maximum(e.sum(axis=-1, keepdims=True), np.float32(1e-30))
+    return out
 
 
 @njit(cache=True, fastmath={"reassoc"})

@@ -1,7 +1,8 @@
 """Safetensors checkpoints of torch modules with a typed config: one writer and one reader for
 the students and CrowdNav++ (weights as tensors; format tag, config and free-form ``info`` as
 JSON in the file's metadata — loading cannot execute code). For the resumable trainers
-(CrowdNav++'s PPO, SB3's): a training-state reader and an optimizer's state as named tensors."""
+(CrowdNav++'s PPO, the students' fine-tuning, SB3's PPO): the one training-state writer and
+reader, and an optimizer's state as named tensors."""
 
 from __future__ import annotations
 
@@ -23,8 +24,10 @@ __all__ = [
     "optimizer_tensors",
     "read_checkpoint",
     "read_training_state",
+    "restore_optimizer",
     "stored_config",
     "write_checkpoint",
+    "write_training_state",
 ]
 
 M = TypeVar("M", bound=nn.Module)
@@ -167,3 +170,54 @@ def read_training_state(
     if meta.get("format") != fmt:
         raise DataError(expect(f"{path}: format", fmt, meta.get("format"), fix))
     return meta, arrays
+
+
+def _groups_key(prefix: str) -> str:
+    """The metadata key of the ``param_groups`` of the optimizer stored under ``prefix``:
+    ``optim`` → ``param_groups``, ``critic_optim`` → ``critic_param_groups``."""
+    return prefix.removesuffix("optim") + "param_groups"
+
+
+def write_training_state(
+    path: Path,
+    fmt: str,
+    *,
+    modules: Mapping[str, nn.Module],
+    optimizers: Mapping[str, torch.optim.Optimizer],
+    tensors: Mapping[str, torch.Tensor],
+    meta: Mapping[str, Any],
+) -> None:
+    """A trainer's whole state to ``path``, atomically: safetensors + metadata, read back by
+    :func:`read_training_state`. Each module's parameters and buffers as ``PREFIX/NAME``, each
+    optimizer's state as ``PREFIX/INDEX/NAME`` (:func:`optimizer_tensors`) with its
+    ``param_groups`` as JSON under :func:`_groups_key` (restored by
+    :func:`restore_optimizer`), the trainer's own ``tensors``, and ``meta``: a string as it
+    is, anything else as JSON; ``format`` (``fmt``) and the ``torch`` version are added."""
+    from safetensors.torch import save
+
+    out: dict[str, torch.Tensor] = {
+        f"{prefix}/{k}": v.detach().cpu().clone().contiguous()
+        for prefix, module in modules.items()
+        for k, v in module.state_dict().items()
+    }
+    info: dict[str, str] = {"format": fmt}
+    for prefix, opt in optimizers.items():
+        osd = opt.state_dict()
+        out.update(optimizer_tensors(osd, prefix))
+        info[_groups_key(prefix)] = json.dumps(osd["param_groups"])
+    out.update(tensors)
+    info.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in meta.items()})
+    info["torch"] = torch.__version__
+    with atomic_path(path) as tmp:  # bytes, not save_file: that makes the file mode 0600
+        tmp.write_bytes(save(out, metadata=info))
+
+
+def restore_optimizer(
+    opt: torch.optim.Optimizer,
+    tensors: Mapping[str, torch.Tensor],
+    meta: Mapping[str, str],
+    prefix: str,
+) -> None:
+    """Load into ``opt`` the state :func:`write_training_state` stored under ``prefix``."""
+    groups = json.loads(meta[_groups_key(prefix)])
+    opt.load_state_dict(optimizer_state(tensors, prefix, groups))

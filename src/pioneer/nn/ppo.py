@@ -99,6 +99,53 @@ def window_row(
     return [mean, *(float(np.mean(ev == c)) if ev.size else math.nan for c in codes)]
 
 
+class Progress(Protocol):
+    """What a trainer's checkpoint keeps of its progress besides the networks, optimizers and
+    environments: counters, the learning curve, the window of the last episodes and both
+    generators (:func:`progress_state`, :func:`restore_progress`)."""
+
+    update: int
+    env_steps: int
+    episodes: int
+    wall: float
+    curve: list[list[float]]
+    win_return: list[float]
+    win_event: list[int]
+    gen: torch.Generator
+    rng: np.random.Generator
+
+
+def progress_state(p: Progress, n_columns: int) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """``(tensors, meta)`` of ``p``'s progress for :func:`pioneer.nn.checkpoint.
+    write_training_state` (``n_columns``: the learning curve's width)."""
+    tensors = {
+        "curve": torch.tensor(p.curve, dtype=torch.float64).reshape(-1, n_columns),
+        "window/return": torch.tensor(p.win_return, dtype=torch.float64),
+        "window/event": torch.tensor(p.win_event, dtype=torch.int64),
+        "rng/torch": p.gen.get_state(),
+    }
+    counters = {"update": p.update, "env_steps": p.env_steps}
+    meta = {
+        "counters": counters | {"episodes": p.episodes, "wall_time_s": p.wall},
+        "rng_numpy": p.rng.bit_generator.state,
+    }
+    return tensors, meta
+
+
+def restore_progress(p: Progress, tensors: dict[str, torch.Tensor], meta: dict[str, str]) -> None:
+    """Set ``p``'s progress to what :func:`progress_state` stored."""
+    import json
+
+    p.curve = tensors["curve"].tolist()
+    p.win_return = tensors["window/return"].tolist()
+    p.win_event = [int(x) for x in tensors["window/event"].tolist()]
+    p.gen.set_state(tensors["rng/torch"])
+    p.rng.bit_generator.state = json.loads(meta["rng_numpy"])
+    c = json.loads(meta["counters"])
+    p.update, p.env_steps = int(c["update"]), int(c["env_steps"])
+    p.episodes, p.wall = int(c["episodes"]), float(c["wall_time_s"])
+
+
 class PPOTrainer(Protocol):
     """What :func:`update_loop` drives: counters, one rollout, one update on it, and the end
     of an update (counted, its learning-curve row returned)."""

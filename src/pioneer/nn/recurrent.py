@@ -35,7 +35,7 @@ from numba import njit
 from numpy.typing import NDArray
 from torch import nn
 
-from pioneer.vecmath import exp32_row
+from pioneer.vecmath import exp_where
 
 __all__ = ["gru_sequence"]
 
@@ -63,17 +63,6 @@ def _tanh_from_exp(x: Any, e: Any, one: Any, c: F) -> Any:  # pragma: no cover -
     x2 = x * x
     series = x * (one - x2 * (c[0] - x2 * (c[1] - x2 * c[2])))
     return series if abs(x) < c[3] else t  # both computed: a select, not a branch to mispredict
-
-
-@njit(cache=True, inline="always")
-def _exp_row(buf: F, shift: Any, count: int, vector: bool) -> None:  # pragma: no cover
-    """``buf[:count] ← e^buf[:count]``: by :func:`pioneer.vecmath.exp32_row` (float32 in SIMD
-    lanes) when ``vector``, else by libm one value at a time (any dtype)."""
-    if vector:
-        exp32_row(buf, shift, count)
-    else:
-        for j in range(count):
-            buf[j] = np.exp(buf[j])
 
 
 @njit(cache=True)
@@ -113,7 +102,7 @@ def _forward(
         for i in range(batch):
             for j in range(2 * hidden):
                 ex[j] = -(gi[t, i, j] + (gh[i, j] + b[j]))
-            _exp_row(ex, shift, 2 * hidden, vector)
+            exp_where(ex, None, ex, shift, 2 * hidden, vector)
             for j in range(2 * hidden):
                 rz[t, i, j] = one / (one + ex[j])  # σ
             for j in range(hidden):
@@ -123,7 +112,7 @@ def _forward(
                 x_n[j] = x
                 a = abs(x)
                 ex[j] = -(a + a)
-            _exp_row(ex, shift, hidden, vector)
+            exp_where(ex, None, ex, shift, hidden, vector)
             for j in range(hidden):
                 v_n = _tanh_from_exp(x_n[j], ex[j], one, tanh_c)
                 n[t, i, j] = v_n

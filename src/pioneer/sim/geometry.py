@@ -94,7 +94,7 @@ def segment_segment_distance(
 ) -> float:
     """Minimum distance [m] between two segments (0 if they intersect).
 
-    Branch-free, so that it vectorises over copies (:mod:`pioneer.sim.lanes`): parallel
+    Branch-free, so that it vectorises over copies (:mod:`pioneer.sim.kernel_simd`): parallel
     segments (denominator 0) give t, u of ±inf or nan, which no interval test passes."""
     rx = ax2 - ax1
     ry = ay2 - ay1

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from pioneer.bounds import NonNegative, Positive
 from pioneer.config import Config
-from pioneer.errors import CommandError, ConfigError, expect
-from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN
+from pioneer.errors import CommandError, expect
+from pioneer.limits import OMEGA_MAX, V_MAX, V_MIN, check_speed_range
 
 __all__ = ["RobotConfig", "clip_command", "integrate_unicycle", "validate_command", "wrap_angle"]
 
@@ -32,10 +32,7 @@ class RobotConfig(Config):
     omega_max: Positive = OMEGA_MAX  # [rad/s] |ω| ≤ omega_max
 
     def __post_init__(self) -> None:
-        if self.v_min > self.v_max:
-            raise ConfigError(
-                expect("RobotConfig.v_min", f"<= v_max={self.v_max}", self.v_min, "lower v_min")
-            )
+        check_speed_range("RobotConfig", self.v_min, self.v_max)
 
     @property
     def command_low(self) -> NDArray[np.float64]:
@@ -76,7 +73,8 @@ def clip_command(u: NDArray[np.float64], cfg: RobotConfig) -> NDArray[np.float64
 
 @njit(cache=True, inline="always")
 def wrap_angle(a: float) -> float:
-    """Wrap an angle [rad] to (−π, π]."""
+    """Wrap an angle [rad] to (−π, π] (for compiled loops; arrays and the light install:
+    :func:`pioneer.laser.wrap_angles`, bit for bit the same)."""
     r = math.pi - ((math.pi - a) % (2.0 * math.pi))
     return r if r > -math.pi else math.pi
 

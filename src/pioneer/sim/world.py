@@ -27,7 +27,7 @@ from pioneer.config import Config, check_positive
 from pioneer.errors import ConfigError, expect
 from pioneer.sim.humans import GONE, SocialForceConfig
 from pioneer.sim.kernel import step_kernel, trajectory_kernel
-from pioneer.sim.lanes import trajectory_kernel_lanes
+from pioneer.sim.kernel_simd import trajectory_kernel_lanes
 from pioneer.sim.lidar import (
     RAY_PRECISION,
     LidarConfig,
@@ -188,12 +188,17 @@ class State:
         return self._each(lambda a: a.repeat(n, axis=0))
 
     @staticmethod
+    def fields() -> tuple[str, ...]:
+        """The names of the state's arrays in declaration order: the keys of a checkpoint
+        that stores a state array by array (the trainers, :mod:`pioneer.learn.layout_env`)."""
+        return _STATE_FIELDS
+
+    @staticmethod
     def concat(states: Sequence[State]) -> State:
         """One state holding every copy of ``states`` in order (B = ΣB_i, equal N)."""
         if not states:
             raise ConfigError(expect("State.concat", "at least one state", 0, "pass states"))
-        names = [f.name for f in dataclasses.fields(State)]
-        return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in names})
+        return State(**{k: np.concatenate([getattr(s, k) for s in states]) for k in _STATE_FIELDS})
 
     def put(self, index: int, single: State) -> None:
         """Overwrite copy ``index`` in place with the B = 1 state ``single`` (an episode that
@@ -314,9 +319,10 @@ def advance(
 
     With ``stop_at_collision`` a copy is not advanced once it has collided (a planner discards
     a colliding candidate): every copy that never collides gets the same values, bit for bit.
-    With ``lanes`` the copies run in SIMD lanes (:mod:`pioneer.sim.lanes`): the same values, bit
-    for bit, faster for many copies; with ``vector_exp`` too, its social forces take e^z from
-    ``lanes.exp_lanes`` (within 2 ulp of ``math.exp``): faster still, no longer bit for bit.
+    With ``lanes`` the copies run in SIMD lanes (:mod:`pioneer.sim.kernel_simd`): the same
+    values, bit for bit, faster for many copies; with ``vector_exp`` too, its social forces take
+    e^z from ``vecmath.exp64_lanes`` (within 2 ulp of ``math.exp``): faster still, no longer
+    bit for bit.
     With ``in_place`` the trace's final state is ``state`` itself, advanced (for a caller that
     made ``state`` for this call alone, as a planner's repeated copies: no copy is made).
     """

@@ -516,7 +516,7 @@ def test_a_variant_is_checked_when_first_used_and_a_missing_file_is_named(clean_
 
 def test_a_variant_with_a_base_uses_the_shipped_demos_and_students_of_it(clean_registry, tmp_path):
     from pioneer.data import base_scenario, shipped_demos, shipped_student
-    from pioneer.reward.default import default_features
+    from pioneer.reward.recipe import default_features
 
     sc = clean_registry
     data = {

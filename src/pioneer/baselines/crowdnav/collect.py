@@ -2,11 +2,11 @@
 (:mod:`~pioneer.baselines.crowdnav.imitation`): one episode driven by the expert through the
 policy's action space, or by a clone (DAgger), with the expert's action as the label of every step
 (:func:`collect_episode`), written to its file by :func:`collect_task`; the world, the expert and
-the round's clone are cached per process."""
+the round's clone are cached per process (:mod:`pioneer.imitation.worker`)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -20,8 +20,8 @@ from pioneer.baselines.crowdnav.observation import (
     command_from_action,
     obs_tensors,
 )
-from pioneer.envs.policy import Planner
-from pioneer.imitation.store import file_version, save_episode
+from pioneer.imitation.store import save_episode
+from pioneer.imitation.worker import LabelledDriver, WorkerCache
 from pioneer.sim.scenarios import ScenarioConfig
 from pioneer.sim.world import State, World
 
@@ -32,7 +32,6 @@ __all__ = [
     "collect_episode",
     "collect_task",
     "episode_seeds",
-    "expert_command",
     "make_expert",
 ]
 
@@ -58,16 +57,18 @@ def action_from_command(
     return np.clip(a, -1.0, 1.0)
 
 
-class _Imitation:
-    """The episode's driver: the teacher (its clipped action) or the model's mean action
-    (DAgger), with every step's observation, teacher label and applied command kept."""
+class _Imitation(LabelledDriver):
+    """The episode's driver: the expert (its command through the policy's action space:
+    clipped) or the model's mean action (DAgger), with every step's observation, expert label
+    and applied command kept."""
 
     name = "crowdnav-imitation"
 
     def __init__(
         self, teacher: Any, net_cfg: CrowdNavConfig, model: CrowdNavNet | None, world: World
     ) -> None:
-        self.teacher, self.net_cfg, self.model, self.world = teacher, net_cfg, model, world
+        super().__init__(teacher, "applied", world)
+        self.net_cfg, self.model, self.sim_world = net_cfg, model, world
         self.cols: dict[str, list[Any]] = {
             k: []
             for k in (
@@ -85,11 +86,12 @@ class _Imitation:
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         self._h = self.model.initial_state(1) if self.model is not None else None
 
-    def act(self, obs: NDArray[np.float32], info: Mapping[str, Any]) -> F64:
+    def drive(self, obs: NDArray[np.float32], info: Mapping[str, Any], decision: Any) -> F64:
         s: State = info["state"]
-        world, sim, net_cfg = self.world, self.world.sim, self.net_cfg
+        world, net_cfg = self.sim_world, self.net_cfg
+        sim = world.sim
         graph = build_observation(s, world, net_cfg)
-        u_star = expert_command(self.teacher, world, s)
+        u_star = np.asarray(decision.command, np.float64)
         a_star = action_from_command(u_star, s.command[:, 0], sim.dt, net_cfg)
         if self.model is None:
             a = a_star
@@ -133,12 +135,6 @@ def collect_episode(
     }
 
 
-def expert_command(expert: Planner, world: World, state: State) -> F64:
-    """The demonstrator's command ``(v, ω)`` in ``state``, smoothed (the lookahead teacher)
-    from the command applied on the last step."""
-    return np.asarray(expert.decide(world, state, prev=state.command[0]).command, np.float64)
-
-
 def make_expert(name: str, scenario: str) -> Any:
     """The demonstrator ``name`` (one of :data:`EXPERTS`) for ``scenario``."""
     from pioneer.control.registry import build_policy
@@ -157,27 +153,12 @@ def episode_seeds(seed: int, round_index: int, n: int) -> list[int]:
     return [int(x) for x in rng.integers(2**62, size=n)]
 
 
-_CACHE: dict[tuple[Any, ...], Any] = {}  # per process: the world, the expert, the driver
+_CACHE = WorkerCache()  # per process: the world, the expert, the driving clone
 
 
 def clear_cache() -> None:
     """Forget the cached world, expert and clone (a new run in this process)."""
     _CACHE.clear()
-
-
-def _cached(key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
-    if key not in _CACHE:
-        _CACHE[key] = make()
-    return _CACHE[key]
-
-
-def _driver(path: str) -> CrowdNavNet:
-    """The clone saved at ``path``; only the latest is kept (a rewritten file is new)."""
-    key = ("driver", *file_version(path))
-    for old in [k for k in _CACHE if k[0] == "driver" and k != key]:
-        del _CACHE[old]
-    model: CrowdNavNet = _cached(key, lambda: load_crowdnav(path))
-    return model
 
 
 CollectTask = tuple[ScenarioConfig, str, CrowdNavConfig, int, int, str | None, str]
@@ -189,8 +170,10 @@ def collect_task(args: CollectTask) -> str:
     scenario, expert name, network config, round, seed, driver clone (``None``: the expert
     drives) and the file."""
     scenario, expert, net_cfg, rnd, seed, driver, path = args
-    world = _cached(("world", scenario.name), scenario.world)
-    teacher = _cached(("expert", expert, scenario.name), lambda: make_expert(expert, scenario.name))
-    model = _driver(driver) if driver is not None else None
+    world = _CACHE.get(("world", scenario.name), scenario.world)
+    teacher = _CACHE.get(
+        ("expert", expert, scenario.name), lambda: make_expert(expert, scenario.name)
+    )
+    model = _CACHE.latest("driver", driver, load_crowdnav) if driver is not None else None
     ep = collect_episode(scenario, world, teacher, seed, net_cfg, model)
     return save_episode(path, {**ep, "round": np.array(rnd, dtype=np.int64)})

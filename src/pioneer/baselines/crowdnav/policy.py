@@ -20,7 +20,7 @@ from pioneer.baselines.crowdnav.observation import (
 )
 from pioneer.data import shipped_crowdnav_weights
 from pioneer.errors import ConfigError, expect
-from pioneer.nn.forward import FORWARD, Forward, check_forward
+from pioneer.nn.forward_choice import FORWARD, Forward, check_forward
 from pioneer.sim.world import State, World
 
 __all__ = ["CrowdNavPolicy", "make_crowdnav_policy"]
@@ -33,7 +33,7 @@ class CrowdNavPolicy:
     ``reset`` zeroes the GRU state; ``act`` builds the graph observation, advances the GRU one
     step and integrates the mean increments on the last command. ``attention`` holds the last
     robot–human weights over the sorted, present humans. ``forward``: who computes the
-    network's step (:mod:`pioneer.nn.forward`).
+    network's step (:mod:`pioneer.nn.forward_choice`).
     """
 
     def __init__(self, model: CrowdNavNet, name: str = "crowdnav++", forward: Forward = FORWARD):

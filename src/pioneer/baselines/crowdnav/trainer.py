@@ -23,9 +23,14 @@ from pioneer.baselines.crowdnav.observation import (
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
 from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
-from pioneer.io import atomic_path
-from pioneer.nn.checkpoint import optimizer_state, optimizer_tensors, read_training_state
-from pioneer.nn.ppo import clipped_surrogate, compute_gae, window_row
+from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
+from pioneer.nn.ppo import (
+    clipped_surrogate,
+    compute_gae,
+    progress_state,
+    restore_progress,
+    window_row,
+)
 from pioneer.nn.recurrent import gru_sequence
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.sim.events import Event, classify
@@ -92,7 +97,6 @@ class PPOConfig(Config):
 
 
 # ------------------------------------------------------------------------------ state helpers
-_STATE_FIELDS = tuple(f.name for f in dataclasses.fields(State))
 
 
 def _flat(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -310,45 +314,26 @@ class _Trainer:
 
     def save(self, path: Path) -> None:
         """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
-        from safetensors.torch import save
-
-        tensors: dict[str, torch.Tensor] = {
-            f"model/{k}": v.detach().clone().contiguous()
-            for k, v in self.model.state_dict().items()
+        tensors = {
+            f"env/{k}": torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
+            for k in State.fields()
         }
-        osd = self.opt.state_dict()
-        tensors.update(optimizer_tensors(osd, "optim"))
-        cosd = self.critic_opt.state_dict()
-        tensors.update(optimizer_tensors(cosd, "critic_optim"))
-        for k in _STATE_FIELDS:
-            tensors[f"env/{k}"] = torch.from_numpy(np.ascontiguousarray(getattr(self.state, k)))
         tensors["train/h"] = self.h.clone().contiguous()
         tensors["train/start"] = torch.from_numpy(self.start.copy())
         tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
-        tensors["curve"] = torch.tensor(self.curve, dtype=torch.float64).reshape(
-            -1, len(CURVE_COLUMNS)
+        progress, meta = progress_state(self, len(CURVE_COLUMNS))
+        tensors.update(progress)
+        write_training_state(
+            path,
+            TRAIN_FORMAT,
+            modules={"model": self.model},
+            optimizers={"optim": self.opt, "critic_optim": self.critic_opt},
+            tensors=tensors,
+            meta={
+                "settings": self.settings(),
+                **meta,
+            },
         )
-        tensors["window/return"] = torch.tensor(self.win_return, dtype=torch.float64)
-        tensors["window/event"] = torch.tensor(self.win_event, dtype=torch.int64)
-        tensors["rng/torch"] = self.gen.get_state()
-        meta = {
-            "format": TRAIN_FORMAT,
-            "settings": json.dumps(self.settings()),
-            "param_groups": json.dumps(osd["param_groups"]),
-            "critic_param_groups": json.dumps(cosd["param_groups"]),
-            "counters": json.dumps(
-                {
-                    "update": self.update,
-                    "env_steps": self.env_steps,
-                    "episodes": self.episodes,
-                    "wall_time_s": self.wall,
-                }
-            ),
-            "rng_numpy": json.dumps(self.rng.bit_generator.state),
-            "torch": torch.__version__,
-        }
-        with atomic_path(path) as tmp:  # bytes, not save_file: that makes the file mode 0600
-            tmp.write_bytes(save(tensors, metadata=meta))
 
     def load(self, path: Path) -> None:
         """Restore the state written by :meth:`save` (settings must match this trainer's)."""
@@ -369,19 +354,11 @@ class _Trainer:
         self.model.load_state_dict(
             {k[len("model/") :]: v for k, v in t.items() if k.startswith("model/")}, strict=True
         )
-        self.opt.load_state_dict(optimizer_state(t, "optim", json.loads(meta["param_groups"])))
+        restore_optimizer(self.opt, t, meta, "optim")
         if "critic_param_groups" in meta:
-            groups = json.loads(meta["critic_param_groups"])
-            self.critic_opt.load_state_dict(optimizer_state(t, "critic_optim", groups))
-        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in _STATE_FIELDS})
+            restore_optimizer(self.critic_opt, t, meta, "critic_optim")
+        self.state = State(**{k: t[f"env/{k}"].numpy().copy() for k in State.fields()})
         self.h = t["train/h"].clone()
         self.start = t["train/start"].numpy().copy()
         self.ep_return = t["train/ep_return"].numpy().copy()
-        self.curve = t["curve"].tolist()
-        self.win_return = t["window/return"].tolist()
-        self.win_event = [int(x) for x in t["window/event"].tolist()]
-        self.gen.set_state(t["rng/torch"])
-        self.rng.bit_generator.state = json.loads(meta["rng_numpy"])
-        c = json.loads(meta["counters"])
-        self.update, self.env_steps = int(c["update"]), int(c["env_steps"])
-        self.episodes, self.wall = int(c["episodes"]), float(c["wall_time_s"])
+        restore_progress(self, t, meta)

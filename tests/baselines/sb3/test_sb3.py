@@ -19,15 +19,9 @@ pytest.importorskip("stable_baselines3")
 import torch
 from safetensors.torch import load_file
 
-from pioneer.baselines.sb3 import (
-    CHECKPOINT,
-    CURVE_COLUMNS,
-    _build,
-    _restore,
-    _save_state,
-    env_id_for,
-    make_sb3_policy,
-)
+from pioneer.baselines.sb3 import CHECKPOINT, CURVE_COLUMNS, env_id_for, make_sb3_policy
+from pioneer.baselines.sb3.checkpoint import restore, save_state
+from pioneer.baselines.sb3.train import _build
 from pioneer.control.registry import build_policy
 from pioneer.envs.env import NavEnv
 from pioneer.registration import register_envs
@@ -219,7 +213,7 @@ def test_the_checkpoint_holds_no_pickle_and_round_trips_the_training_state(resum
     try:
         register_envs()
         model, venv = _build("pioneer/ElevatorHLRR-v1", {}, 1, 0)  # a fresh model
-        curve = _restore(ckpt, model)
+        curve = restore(ckpt, model)
         venv.close()
         assert model.num_timesteps == 4096 and model._n_updates == 20  # 2 updates of 10 epochs
         assert len(curve.rows) == 2 and len(curve.window) == min(curve.episodes, 100)
@@ -240,7 +234,7 @@ def test_the_checkpoint_holds_no_pickle_and_round_trips_the_training_state(resum
         # written again from the restored model: the same tensors and state
         again = tmp_path / "again.safetensors"
         settings = json.loads(header["__metadata__"]["settings"])
-        _save_state(again, model, curve, curve.wall, settings)
+        save_state(again, model, curve, curve.wall, settings)
         rewritten = load_file(again)
         assert rewritten.keys() == stored.keys()
         assert all(torch.equal(rewritten[k], stored[k]) for k in stored), "round trip"
@@ -317,7 +311,7 @@ def test_a_signal_keeps_the_finished_updates_and_the_rerun_resumes(resumed, tmp_
 @pytest.mark.parametrize("scenario", ["hr-rl", "hl-rr"])
 def test_the_shipped_policy_loads_without_weights(scenario):
     """The `sb3-ppo` row of Table I: the shipped file of each scenario, the files it recorded."""
-    from pioneer.control.parts import sb3_files
+    from pioneer.control.policy_files import sb3_files
     from pioneer.data import shipped_sb3_weights
 
     policy = build_policy("sb3-ppo", scenario)

@@ -21,8 +21,9 @@ reference. ``pioneer.sim.world.advance(..., lanes=True)`` calls it (the teacher'
 rollout does); the reference stays the default of ``advance`` and the oracle of the tests.
 
 The one exception to bit-identity is asked for by name: ``vector_exp`` takes the forces'
-exponentials from :func:`exp_lanes`, a vectorised e^x within 2 ulp of libm's (the teacher's
-``precision="fast"``; docs/performance.md, "The rollout in SIMD lanes").
+exponentials from :func:`pioneer.vecmath.exp64_lanes`, a vectorised e^x within 2 ulp of
+libm's (the teacher's ``precision="fast"``; docs/performance.md, "The rollout in SIMD
+lanes"); :func:`pioneer.vecmath.exp_where` chooses it or libm.
 """
 
 from __future__ import annotations
@@ -44,68 +45,13 @@ from pioneer.sim.humans import (
     push_out_of_walls,
 )
 from pioneer.sim.robot import integrate_unicycle
+from pioneer.vecmath import exp_where
 
 __all__ = ["trajectory_kernel_lanes"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
-
-
-@njit(cache=True, error_model="numpy")
-def _exp_where(z: F64, ok: B8, out: F64, n: int) -> None:
-    """``out[l] = exp(z[l])`` where ``ok[l]``, else 0 (the scalar part of a lane pass)."""
-    for ln in range(n):
-        out[ln] = math.exp(z[ln]) if ok[ln] else 0.0
-
-
-# e^x in lanes: x = n ln2 + r with n = round(x / ln 2) (by adding 1.5 · 2^52, whose last bits
-# then hold n) and |r| ≤ ln2 / 2 by the Cody–Waite split of ln 2 (fdlibm's ln2_hi has its 32
-# low bits zero, so n · ln2_hi is exact); e^r by its Taylor polynomial of degree 13 (the
-# remainder below 4e-18 relative) in Estrin's scheme; 2^n by adding n to the exponent bits.
-_LOG2E = 1.4426950408889634
-_LN2_HI = 6.93147180369123816490e-01
-_LN2_LO = 1.90821492927058770002e-10
-_ROUND = 6755399441055744.0  # 1.5 · 2^52
-_ROUND_BITS = np.float64(_ROUND).view(np.int64).item()
-_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(14))
-
-
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
-def exp_lanes(z: F64, ok: B8, out: F64, scratch: F64, n: int) -> None:
-    """``out[l] = e^z[l]`` where ``ok[l]``, else 0, for ``|z| ≤ 700``: within 2 ulp of
-    ``math.exp`` and branch-free, so that LLVM vectorises it (the comment above). Products
-    and sums may fuse (``contract``, the only fast-math flag: one FMA instead of a rounded
-    product and a sum, deterministic on one machine; twice as fast)."""
-    c = _TAYLOR
-    for ln in range(n):
-        zc = min(max(z[ln], -700.0), 700.0)
-        tn = zc * _LOG2E + _ROUND
-        nf = tn - _ROUND
-        r = (zc - nf * _LN2_HI) - nf * _LN2_LO
-        r2 = r * r
-        r4 = r2 * r2
-        r8 = r4 * r4
-        p0 = (c[0] + c[1] * r) + (c[2] + c[3] * r) * r2
-        p1 = (c[4] + c[5] * r) + (c[6] + c[7] * r) * r2
-        p2 = (c[8] + c[9] * r) + (c[10] + c[11] * r) * r2
-        p3 = c[12] + c[13] * r
-        p = (p0 + p1 * r4) + (p2 + p3 * r4) * r8
-        out[ln] = p if ok[ln] else 0.0
-        scratch[ln] = tn if ok[ln] else _ROUND  # n = 0 where not ok: 0 stays 0
-    bits = out.view(np.int64)
-    nbits = scratch.view(np.int64)
-    for ln in range(n):
-        bits[ln] += (nbits[ln] - _ROUND_BITS) << 52
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _exp(z: F64, ok: B8, out: F64, scratch: F64, n: int, vector: bool) -> None:
-    """``out[l] = e^z[l]`` where ``ok[l]``, else 0: by ``exp_lanes`` or by ``math.exp``."""
-    if vector:
-        exp_lanes(z, ok, out, scratch, n)
-    else:
-        _exp_where(z, ok, out, n)
 
 
 @njit(cache=True, error_model="numpy")
@@ -126,12 +72,12 @@ def trajectory_kernel_lanes(
     clear_min: F64,  # (B,) out: the minimum of the step gaps over the L steps
     wclear_min: F64,  # (B,) out: the minimum of the step wall gaps over the L steps
     live_steps: I64,  # (B,) out: how many records of each copy are distinct
-    vector_exp: bool = False,  # e^z by exp_lanes (within 2 ulp), not math.exp (the same bits)
+    vector_exp: bool = False,  # e^z by vecmath.exp64_lanes (within 2 ulp), not math.exp
 ) -> None:
     """What ``kernel.trajectory_kernel`` computes from the same arguments, bit for bit: the
     state arrays of ``step_args`` advanced L = ``poses.shape[1]`` steps in place, and the same
     records (module docstring). With ``vector_exp`` the social forces' exponentials come from
-    :func:`exp_lanes` instead: the values then differ in their last bits."""
+    :func:`pioneer.vecmath.exp64_lanes` instead: the values then differ in their last bits."""
     (
         robot, cmd, cmd_out, v_min, v_max, omega_max, goal, t, path, collided, reached,
         clear_out, wclear_out, hpos, hvel, hrad, hvpref, hwp, hnwp, hwpi, hstatus, hdelay,
@@ -353,7 +299,7 @@ def trajectory_kernel_lanes(
                         ok[ln] = stj[ln] != GONE and d > 1e-9 and z > EXP_CUTOFF
                         n_ok += ok[ln]
                     if n_ok:  # (most pairs are out of range in every lane)
-                        _exp(zs, ok, es, e_scr, n, vector_exp)
+                        exp_where(zs, ok, es, e_scr, n, vector_exp)
                         _accumulate(ax, ay, a_h, es, dxs, dys, ds, ok, n)
                 rei = reacts[i]
                 for ln in range(n):
@@ -366,7 +312,7 @@ def trajectory_kernel_lanes(
                     ds[ln] = d
                     zs[ln] = z
                     ok[ln] = rei[ln] and a_r[ln] > 0.0 and d > 1e-9 and z > EXP_CUTOFF
-                _exp(zs, ok, es, e_scr, n, vector_exp)
+                exp_where(zs, ok, es, e_scr, n, vector_exp)
                 for ln in range(n):
                     mag = a_r[ln] * es[ln]
                     ax[ln] = ax[ln] + mag * dxs[ln] / ds[ln] if ok[ln] else ax[ln]
@@ -399,7 +345,7 @@ def trajectory_kernel_lanes(
                         ok[ln] = d > 1e-9 and z > EXP_CUTOFF
                         n_ok += ok[ln]
                     if n_ok:  # (most walls are out of range in every lane)
-                        _exp(zs, ok, es, e_scr, n, vector_exp)
+                        exp_where(zs, ok, es, e_scr, n, vector_exp)
                         _accumulate(ax, ay, a_w, es, dxs, dys, ds, ok, n)
                 fxi, fyi = fx[i], fy[i]
                 for ln in range(n):

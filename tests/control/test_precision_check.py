@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pioneer.control.precision import (
+from pioneer.control.precision_check import (
     MIN_SAME_SHARE,
     SCORE_TOLERANCE,
     DecisionInput,

@@ -11,8 +11,8 @@ import pytest
 from pioneer.errors import ConfigError
 from pioneer.sim import get_scenario, sample_state
 from pioneer.sim.humans import ARRIVED, GONE
-from pioneer.sim.lanes import exp_lanes
 from pioneer.sim.world import State, WorldTrace, advance
+from pioneer.vecmath import exp64_lanes
 from pioneer_testutils import states_equal
 
 
@@ -92,12 +92,12 @@ def test_exp_lanes_is_within_two_ulp_of_libm():
         z = rng.uniform(lo, hi, 20_000)
         ok = rng.random(z.size) < 0.8
         out = np.empty_like(z)
-        exp_lanes(z, ok, out, np.empty_like(z), z.size)
+        exp64_lanes(z, ok, out, np.empty_like(z), z.size)
         ref = np.array([math.exp(v) for v in z[ok]])
         assert np.all(np.abs(out[ok] - ref) <= 2 * np.spacing(ref))
         assert np.all(out[~ok] == 0.0)
     out = np.empty(3)
-    exp_lanes(np.array([0.0, 1.0, -1.0]), np.ones(3, bool), out, np.empty(3), 3)
+    exp64_lanes(np.array([0.0, 1.0, -1.0]), np.ones(3, bool), out, np.empty(3), 3)
     assert out[0] == 1.0 and out[1] == pytest.approx(math.e, rel=1e-15)
 
 

@@ -3,9 +3,10 @@
 Two kinds of function, named by the policy registry (:mod:`pioneer.control.registry`):
 
 - a *check* ``(scenario, kwargs) -> None`` raises before any output is written when a part the
-  policy would load is missing or does not fit the scenario — the shipped parts
-  (:mod:`pioneer.data.parts`) and, for the teacher, a given reward model: its features must be
-  the scenario's (a static-study (x, y) reward cannot score an elevator rollout);
+  policy would load is missing or does not fit the scenario — the shipped parts (a
+  :class:`~pioneer.errors.DataError` from the locators in :mod:`pioneer.data`) and, for the
+  teacher, a given reward model: its features must be the scenario's (a static-study (x, y)
+  reward cannot score an elevator rollout);
 - a *files* function ``(scenario, params) -> {name: path}`` names the shipped files a policy
   falls back on when a path parameter is left unset (the teacher's default reward is fitted on
   the shipped demonstrations; a student without ``checkpoint`` is the shipped one), so that a
@@ -20,11 +21,18 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pioneer.data import parts as shipped
-from pioneer.data import shipped_crowdnav_weights, shipped_sb3_weights, shipped_student_for
+from pioneer.data import (
+    shipped_crowdnav_weights,
+    shipped_demos,
+    shipped_sb3_weights,
+    shipped_student_for,
+)
 
 __all__ = [
+    "check_crowdnav",
+    "check_sb3",
     "check_shield",
+    "check_student",
     "check_teacher",
     "crowdnav_files",
     "sb3_files",
@@ -40,22 +48,39 @@ def _path(value: object, scenario: str) -> str:
 
 def check_teacher(scenario: str, kwargs: Mapping[str, Any]) -> None:
     """The shipped demos behind the default reward, or the given reward model, which must
-    load and fit ``scenario`` (:func:`pioneer.reward.default.check_reward_fits`)."""
-    shipped.teacher(scenario, kwargs)
+    load and fit ``scenario`` (:func:`pioneer.reward.recipe.check_reward_fits`)."""
     reward = kwargs.get("reward")
+    if kwargs.get("density", True) and not reward:
+        shipped_demos(scenario)
     if kwargs.get("density", True) and reward:
-        from pioneer.reward.default import check_reward_fits
         from pioneer.reward.density import DensityReward
+        from pioneer.reward.recipe import check_reward_fits
 
         path = _path(reward, scenario)
         check_reward_fits(DensityReward.load(path), scenario, path)
 
 
+def check_student(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``checkpoint`` a student is the scenario's shipped one of its kind."""
+    if not kwargs.get("checkpoint"):
+        shipped_student_for(scenario, kwargs)
+
+
 def check_shield(scenario: str, kwargs: Mapping[str, Any]) -> None:
-    """The shielded student's parts, and the reward of the teacher it hands over to."""
-    shipped.shield(scenario, kwargs)
+    """The shielded MDN student, and the teacher it hands over to (with its reward)."""
+    check_student(scenario, {**kwargs, "kind": "mdn"})
     if _hands_over_to_teacher(kwargs):
         check_teacher(scenario, {"reward": kwargs.get("reward")})
+
+
+def check_crowdnav(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``weights`` CrowdNav++ loads the scenario's shipped weights of its variant."""
+    crowdnav_files(scenario, kwargs)
+
+
+def check_sb3(scenario: str, kwargs: Mapping[str, Any]) -> None:
+    """Without ``weights`` the SB3 policy is the scenario's shipped one."""
+    sb3_files(scenario, kwargs)
 
 
 def _hands_over_to_teacher(kwargs: Mapping[str, Any]) -> bool:
@@ -69,7 +94,7 @@ def teacher_files(scenario: str, params: Mapping[str, Any]) -> dict[str, Path]:
     """Without ``reward``, the shipped demonstrations the default reward is fitted on."""
     if not params.get("density", True) or params.get("reward"):
         return {}
-    from pioneer.reward.default import default_reward_demos
+    from pioneer.reward.recipe import default_reward_demos
 
     return default_reward_demos(scenario)
 
