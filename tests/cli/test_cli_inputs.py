@@ -89,6 +89,14 @@ def work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scenario_registry) -> 
         ),
         (["--scenarios", "l.json", "sample-layouts", "--n", "1", "--out", "l.json"], "itself"),
         (["reward", "fit", "--demos", "link.npz", "--out", "d.npz"], "a link to the input"),
+        (
+            ["run", "--policy", "student-mdn:checkpoint=s.safetensors", "--png", "s.safetensors"],
+            "the input",
+        ),
+        (
+            ["run", "--policy", "student-mdn:checkpoint=s.safetensors", "--gif", "link2.st"],
+            "a link to the input",
+        ),
     ],
     ids=[
         "reward-fit",
@@ -99,11 +107,14 @@ def work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scenario_registry) -> 
         "replay-bag",
         "scenarios",
         "symlink-input",
+        "run-png-onto-the-policy-file",
+        "run-gif-onto-a-link-to-it",
     ],
 )
 def test_an_output_that_is_an_input_is_refused(work, capsys, argv, needle):
     os.link(work / "d.npz", work / "hard.npz")
     os.symlink(work / "d.npz", work / "link.npz")
+    os.symlink(work / "s.safetensors", work / "link2.st")
     _refused(work, capsys, argv, needle)
 
 

@@ -130,12 +130,24 @@ class Run:
                     "drop the flags",
                 )
             )
-        policy = build_policy(spec.name, scenario, **{**dict(spec.kwargs), **abl})
+        kwargs = {**dict(spec.kwargs), **abl}
+        policy = build_policy(spec.name, scenario, **kwargs)  # refuses missing files clearly
+        self._check_policy_files(spec.name, scenario, kwargs)
         if spec.label:
             policy.name = spec.label
         if abl:
             policy.name = spec.row + self.ablation.suffix()
         return policy
+
+    def _check_policy_files(self, name: str, scenario: str, kwargs: dict[str, object]) -> None:
+        """Refuse a --gif/--png onto a file the policy loads (its checkpoint, reward, …)."""
+        from pioneer.control.registry import resolve_policy
+        from pioneer.io import check_not_input
+
+        files = [f["path"] for f in resolve_policy(name, scenario, kwargs)["files"].values()]
+        for out in (self.gif, self.png):
+            if out:
+                check_not_input(out, files)
 
     def _draw(self, scenario: ScenarioConfig, policy: Policy, traj: Trajectory, event: str) -> None:
         from pioneer.progress import progress_bar
