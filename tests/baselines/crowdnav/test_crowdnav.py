@@ -629,6 +629,26 @@ def test_an_interrupted_imitation_resumes_to_the_same_clone(warm_run, tmp_path, 
                 np.testing.assert_array_equal(x[k], y[k], err_msg=f"{p}:{k}")
 
 
+def test_a_resumed_imitation_over_a_corrupt_episode_is_refused_before_any_work(
+    warm_run, tmp_path, monkeypatch
+):
+    """A corrupt episode of an earlier round is named before a resumed run collects anything
+    (the students' DAgger checked this; the warm start found it only when it loaded the round)."""
+    out, _, _ = warm_run
+    run = tmp_path / "run"
+    shutil.copytree(out / "imitation", run / "imitation")
+    rounds = run / "imitation" / "rounds"
+    shutil.rmtree(rounds / "round-02")  # a round still to collect
+    (rounds / "round-00" / "ep-001.npz").write_bytes(b"truncated")
+    collected = []
+    monkeypatch.setattr(crowdnav_collect, "collect_episode", lambda *a, **k: collected.append(a))
+    before = file_tree(run)
+    with pytest.raises(DataError) as err:
+        _warm(run)
+    assert_house_message(str(err.value), "ep-001.npz", "delete that file")
+    assert file_tree(run) == before and collected == []
+
+
 def test_an_imitation_of_other_settings_is_refused_before_writing(warm_run, tmp_path):
     out, _, _ = warm_run
     run = tmp_path / "run"

@@ -313,9 +313,11 @@ def warm_start(
     folder = RunFolder(
         out / DATA_DIR, ROUND_POLICY_FILE, "CrowdNav++ imitation", free=("dagger_rounds",)
     )
-    folder.prepare(settings)
     method = _Cloning(scenario, net_cfg, config, seed)
     sizes = method.sizes()
+    folder.check(settings)
+    folder.check_episodes(sizes)  # a corrupt episode is refused before any new one
+    folder.prepare(settings)
 
     def start(rnd: int, todo: int) -> None:
         if progress and todo:
