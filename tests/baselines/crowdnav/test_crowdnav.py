@@ -632,20 +632,20 @@ def test_an_interrupted_imitation_resumes_to_the_same_clone(warm_run, tmp_path, 
 def test_a_resumed_imitation_over_a_corrupt_episode_is_refused_before_any_work(
     warm_run, tmp_path, monkeypatch
 ):
-    """A corrupt episode of an earlier round is named before a resumed run collects anything
-    (the students' DAgger checked this; the warm start found it only when it loaded the round)."""
+    """A corrupt episode is named before a resumed run collects anything (the warm start used
+    to collect the missing episodes of the rounds before it first)."""
     out, _, _ = warm_run
     run = tmp_path / "run"
     shutil.copytree(out / "imitation", run / "imitation")
     rounds = run / "imitation" / "rounds"
-    shutil.rmtree(rounds / "round-02")  # a round still to collect
-    (rounds / "round-00" / "ep-001.npz").write_bytes(b"truncated")
+    (rounds / "round-00" / "ep-000.npz").unlink()  # an episode still to collect, first
+    (rounds / "round-01" / "ep-000.npz").write_bytes(b"truncated")
     collected = []
     monkeypatch.setattr(crowdnav_collect, "collect_episode", lambda *a, **k: collected.append(a))
     before = file_tree(run)
     with pytest.raises(DataError) as err:
         _warm(run)
-    assert_house_message(str(err.value), "ep-001.npz", "delete that file")
+    assert_house_message(str(err.value), "round-01", "ep-000.npz", "delete that file")
     assert file_tree(run) == before and collected == []
 
 
