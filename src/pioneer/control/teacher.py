@@ -345,8 +345,10 @@ class LookaheadTeacher:
 
     def scores(self, world: World, state: State) -> F64:
         """Every candidate's total score from ``state`` (B = 1), −∞ where infeasible (or, when
-        some candidate keeps the soft margins, where it does not); the
-        decision is its argmax (ties: the lowest candidate index)."""
+        some candidate keeps the soft margins, where it does not); the decision of a patient
+        teacher (:class:`Patience`) is its argmax (ties: the lowest candidate index). A state
+        alone holds no progress history, so the scores are always the patient ones: an
+        impatient :meth:`decide` scores by the rule terms alone."""
         world, state = self.config.assume.apply(world, state, self._assumed)
         return self._score(world, state).scored
 
