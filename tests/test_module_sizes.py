@@ -23,9 +23,7 @@ def _lines(path: Path) -> int:
 def listed_exceptions(text: str) -> dict[str, str]:
     """``{module path under src/pioneer: reason}`` from the section's table rows
     (``| `sim/kernel_simd.py` | why |``)."""
-    section = text.split(SECTION, 1)[1].split("\n## ", 1)[0]
-    rows = re.findall(r"^\| `([^`]+\.py)` \| (.+?) \|$", section, flags=re.MULTILINE)
-    return dict(rows)
+    return _section_rows(text, r"[^`]+\.py")
 
 
 def test_the_exceptions_table_parses():
@@ -36,28 +34,36 @@ def test_the_exceptions_table_parses():
     assert rows == {"a/b.py": "one kernel"}
 
 
+def _section_rows(text: str, key: str) -> dict[str, str]:
+    """``{key: reason}`` of the section's table rows whose first cell matches ``key``."""
+    section = text.split(SECTION, 1)[1].split("\n## ", 1)[0]
+    return dict(re.findall(rf"^\| `({key})` \| (.+?) \|$", section, flags=re.MULTILINE))
+
+
+def _check_listed(over: dict[str, int], listed: dict[str, str], what: str, limit: int) -> None:
+    """Every ``over`` item is listed with its reason, and every listed one is over."""
+    unlisted = {k: n for k, n in over.items() if k not in listed}
+    assert not unlisted, (
+        f"over {limit} lines: {unlisted}; split the {what}, or list it with its reason in "
+        f"docs/architecture.md ({SECTION[3:]})"
+    )
+    stale = sorted(k for k in listed if k not in over)
+    assert not stale, f"listed in docs/architecture.md but not over {limit} lines: {stale}"
+    assert all(len(why) > 20 for why in listed.values()), "every exception gives its reason"
+
+
 def test_no_module_is_over_the_limit_unless_listed_with_its_reason():
-    listed = listed_exceptions(DOC.read_text(encoding="utf-8"))
     over = {
         p.relative_to(SRC).as_posix(): _lines(p)
         for p in sorted(SRC.rglob("*.py"))
         if _lines(p) > LIMIT
     }
-    unlisted = {m: n for m, n in over.items() if m not in listed}
-    assert not unlisted, (
-        f"over {LIMIT} lines: {unlisted}; split the module, or list it with its reason in "
-        f"docs/architecture.md ({SECTION[3:]})"
-    )
-    stale = sorted(m for m in listed if m not in over)
-    assert not stale, f"listed in docs/architecture.md but not over {LIMIT} lines: {stale}"
-    assert all(len(why) > 20 for why in listed.values()), "every exception gives its reason"
+    _check_listed(over, listed_exceptions(DOC.read_text(encoding="utf-8")), "module", LIMIT)
 
 
 def listed_functions(text: str) -> dict[str, str]:
     """``{"path.py::name": reason}`` from the section's function rows."""
-    section = text.split(SECTION, 1)[1].split("\n## ", 1)[0]
-    rows = re.findall(r"^\| `([^`]+\.py::\w+)` \| (.+?) \|$", section, flags=re.MULTILINE)
-    return dict(rows)
+    return _section_rows(text, r"[^`]+\.py::\w+")
 
 
 def test_no_function_is_over_its_limit_unless_listed_with_its_reason():
@@ -71,11 +77,4 @@ def test_no_function_is_over_its_limit_unless_listed_with_its_reason():
                 if n > FUNCTION_LIMIT:
                     over[f"{p.relative_to(SRC).as_posix()}::{node.name}"] = n
     listed = listed_functions(DOC.read_text(encoding="utf-8"))
-    unlisted = {f: n for f, n in over.items() if f not in listed}
-    assert not unlisted, (
-        f"over {FUNCTION_LIMIT} lines: {unlisted}; split the function, or list it with its "
-        f"reason in docs/architecture.md ({SECTION[3:]})"
-    )
-    stale = sorted(f for f in listed if f not in over)
-    assert not stale, f"listed but not over {FUNCTION_LIMIT} lines: {stale}"
-    assert all(len(why) > 20 for why in listed.values()), "every exception gives its reason"
+    _check_listed(over, listed, "function", FUNCTION_LIMIT)

@@ -603,20 +603,27 @@ def test_start_now_decides_as_the_teacher_of_people_who_start_now():
     assert (state.h_delay[0] > state.t[0]).sum() == waiting.sum()  # the given state unchanged
 
 
-def test_patience_runs_out_after_its_time_without_progress():
+def _placed_on_the_way():
+    """``(at, d0)``: ``at(time, dist)`` is an hr-rl start state with the robot ``dist`` from
+    the goal (on the start–goal line) at ``time``; ``d0`` the start's distance."""
     env = NavEnv("hr-rl")
     _, info = env.reset(seed=5)
     state = info["state"]
-    t = make_teacher("hr-rl", density=False, patience=1.0)
-    assert t.config.patience == Patience(after=1.0)
     d0 = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
 
-    def at(time: float, dist: float):  # the robot ``dist`` from the goal at ``time``
+    def at(time: float, dist: float):
         toward = (state.goal[0] - state.robot[0, :2]) / d0
         robot = state.robot.copy()
         robot[0, :2] = state.goal[0] - toward * dist
         return dataclasses.replace(state, robot=robot, t=np.array([time]))
 
+    return at, d0
+
+
+def test_patience_runs_out_after_its_time_without_progress():
+    at, d0 = _placed_on_the_way()
+    t = make_teacher("hr-rl", density=False, patience=1.0)
+    assert t.config.patience == Patience(after=1.0)
     assert not t.impatient(at(0.0, d0))
     assert not t.impatient(at(0.9, d0 - 0.04))  # less than `progress` (5 cm): no progress
     assert t.impatient(at(1.0, d0 - 0.04))  # 1 s since the last progress
@@ -644,18 +651,8 @@ def test_an_impatient_teacher_decides_by_the_rule_terms_alone():
 
 
 def test_an_impatient_teacher_holds_its_impatience_for_its_hold_time():
-    env = NavEnv("hr-rl")
-    _, info = env.reset(seed=5)
-    state = info["state"]
+    at, d0 = _placed_on_the_way()
     t = make_teacher("hr-rl", density=False, patience=1.0, patience_hold=2.0)
-    d0 = float(np.linalg.norm(state.robot[0, :2] - state.goal[0]))
-
-    def at(time: float, dist: float):  # the robot ``dist`` from the goal at ``time``
-        toward = (state.goal[0] - state.robot[0, :2]) / d0
-        robot = state.robot.copy()
-        robot[0, :2] = state.goal[0] - toward * dist
-        return dataclasses.replace(state, robot=robot, t=np.array([time]))
-
     assert not t.impatient(at(0.0, d0))
     assert t.impatient(at(1.0, d0))  # 1 s without progress: impatient until t = 3 s
     assert t.impatient(at(1.5, d0 - 1.0))  # progress, but within the hold

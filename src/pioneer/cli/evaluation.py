@@ -141,10 +141,10 @@ class Run:
 
     def _check_policy_files(self, name: str, scenario: str, kwargs: dict[str, object]) -> None:
         """Refuse a --gif/--png onto a file the policy loads (its checkpoint, reward, …)."""
-        from pioneer.control.registry import resolve_policy
+        from pioneer.control.registry import policy_paths
         from pioneer.io import check_not_input
 
-        files = [f["path"] for f in resolve_policy(name, scenario, kwargs)["files"].values()]
+        files = policy_paths(name, scenario, kwargs)
         for out in (self.gif, self.png):
             if out:
                 check_not_input(out, files)

@@ -46,6 +46,7 @@ __all__ = [
     "policy_entry",
     "policy_factory",
     "policy_names",
+    "policy_paths",
     "register_policy",
     "resolve_policy",
 ]
@@ -402,13 +403,10 @@ def build_policy(name: str, scenario: str | None = None, **kwargs: Any) -> Polic
     return factory(**kwargs)
 
 
-def resolve_policy(name: str, scenario: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
-    """What policy ``name`` with ``kwargs`` is made of in ``scenario``, as plain JSON data:
-    ``{"policy": name, "params": {…}, "files": {key: {"path", "sha256"}}}`` — every parameter
-    of its factory with the value it gets (given, fixed by the entry, or its default; a path's
-    ``{scenario}`` filled in) and the content hash of every file it loads: the given paths of
-    :data:`FILE_PARAMETERS` and the shipped files the entry falls back on. Imports the factory
-    (torch for the students)."""
+def _resolved(
+    name: str, scenario: str, kwargs: Mapping[str, Any]
+) -> tuple[dict[str, Any], dict[str, Path]]:
+    """Every parameter of ``name``'s factory with the value it gets, and the files it loads."""
     entry = policy_entry(name)
     target = entry.target()
     fixed = dict(entry.kwargs)
@@ -429,6 +427,23 @@ def resolve_policy(name: str, scenario: str, kwargs: Mapping[str, Any]) -> dict[
             files[key] = Path(params[key])
     if entry.files:
         files.update(entry._load(entry.files)(scenario, params))
+    return params, files
+
+
+def policy_paths(name: str, scenario: str, kwargs: Mapping[str, Any]) -> list[Path]:
+    """The files policy ``name`` with ``kwargs`` loads in ``scenario`` (not read: e.g. to
+    refuse an output onto one of them)."""
+    return list(_resolved(name, scenario, kwargs)[1].values())
+
+
+def resolve_policy(name: str, scenario: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """What policy ``name`` with ``kwargs`` is made of in ``scenario``, as plain JSON data:
+    ``{"policy": name, "params": {…}, "files": {key: {"path", "sha256"}}}`` — every parameter
+    of its factory with the value it gets (given, fixed by the entry, or its default; a path's
+    ``{scenario}`` filled in) and the content hash of every file it loads: the given paths of
+    :data:`FILE_PARAMETERS` and the shipped files the entry falls back on. Imports the factory
+    (torch for the students)."""
+    params, files = _resolved(name, scenario, kwargs)
     return {
         "policy": name,
         "params": {k: _plain(v) for k, v in sorted(params.items())},
