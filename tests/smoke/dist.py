@@ -103,6 +103,28 @@ class Job:
         self.failed += counts["failed"] + (proc.returncode != 0 and not counts["failed"])
 
 
+PATIENT_DOWNLOADS = ["--retries", "10", "--resume-retries", "20", "--timeout", "60"]
+"""pip's options for a slow or interrupted registry: an install downloads ≈ 100 MB of
+wheels, and one cut connection must not fail the smoke (CI saw a 27.8 MB wheel stop at 11.8 MB
+six times in a row)."""
+
+NETWORK_ERRORS = ("incomplete-download", "Connection", "ReadTimeout", "Max retries exceeded")
+"""What in pip's log says the network failed, not the package: such an install is retried."""
+
+
+def install(job: Job, cmd: list[str], log: str, attempts: int = 3) -> str:
+    """``job.run(cmd)``, run again (up to ``attempts`` in all, 10 s apart) when pip failed on
+    the network; a failure of the package itself is raised at once."""
+    for attempt in range(1, attempts + 1):
+        try:
+            return job.run(cmd, log if attempt == 1 else f"{log}.{attempt}")
+        except RuntimeError as exc:
+            if attempt == attempts or not any(e in str(exc) for e in NETWORK_ERRORS):
+                raise
+            time.sleep(10)
+    raise AssertionError("unreachable")
+
+
 def find_python(version: str) -> Path:
     """A ``python{version}`` that runs: on the PATH, else pyenv's (whose shims answer only
     for the selected version)."""
@@ -259,7 +281,7 @@ def main() -> int:
             pip = [str(where / "bin" / "python"), "-m", "pip", "install"]
             pip += ["-c", str(ROOT / "constraints.txt")] if pinned else []
             job.run([*pip, "--upgrade", "pip"], f"{name}-pip.log")
-            job.run([*pip, requirement], f"{name}-install.log")
+            install(job, [*pip, *PATIENT_DOWNLOADS, requirement], f"{name}-install.log")
             freeze = job.run([str(where / "bin" / "python"), "-m", "pip", "freeze"], f"{name}.txt")
             picked = [x for x in freeze.split() if x.startswith(("numpy==", "numba==", "torch=="))]
             return f"{python} → {', '.join(picked)} (all: {name}.txt)"
@@ -282,8 +304,9 @@ def main() -> int:
             if venv(job, version, name, str(wheel), pinned=False):
                 tmp = str(out / f"{name}-tmp")
                 job.checks_in(name, out / name / "bin" / "python", "check.py", "--tmp", tmp)
-        venv(job, plain[-1], "runtime", str(runtime_wheel), pinned=False)
+        runtime_ready.append(venv(job, plain[-1], "runtime", str(runtime_wheel), pinned=False))
 
+    runtime_ready: list[bool] = []  # the runtime's venv installed (checks run only then)
     jobs = [Job(out), Job(out)]
     threads = [
         threading.Thread(target=learn_job, args=(jobs[0],)),
@@ -295,7 +318,7 @@ def main() -> int:
         thread.join()
         job.flush()
     last = Job(out)
-    if (out / "runtime" / "bin" / "python").exists():
+    if runtime_ready == [True]:
         last.checks_in("runtime", out / "runtime" / "bin" / "python", "runtime_check.py",
                        "--onnx", str(onnx))  # fmt: skip
     last.flush()
