@@ -14,7 +14,7 @@ import torch
 from safetensors.torch import load_file
 
 from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, finetune_student
-from pioneer.learn.finetune_trainer import FinetuneTrainer
+from pioneer.learn.finetune_trainer import CURVE_COLUMNS, FinetuneTrainer
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
 from pioneer.learn.models import (
     StudentConfig,
@@ -23,6 +23,7 @@ from pioneer.learn.models import (
     read_checkpoint_meta,
     save_student,
 )
+from pioneer.nn.ppo import lagrangian_advantage
 from pioneer.reward.crowdnav import crowdnav_reward_terms
 from pioneer.sim.events import Event
 from pioneer.sim.scenarios import get_scenario, sample_state
@@ -136,9 +137,42 @@ def test_a_symmetric_student_stays_mirror_equivariant(tmp_path: Path) -> None:
     torch.testing.assert_close(um, u * torch.tensor([1.0, -1.0]), atol=1e-5, rtol=1e-5)
 
 
-def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+def test_the_lagrangian_advantage_weighs_the_cost_by_lambda() -> None:
+    adv, cost = np.array([1.0, -2.0, 0.5]), np.array([0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(lagrangian_advantage(adv, cost, 0.0), adv)
+    np.testing.assert_allclose(lagrangian_advantage(adv, cost, 3.0), [0.25, -1.25, -1.375])
+
+
+def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) -> None:
+    start = load_student(_student(tmp_path))
+    cfg = dataclasses.replace(TINY, collision_limit=0.1, lagrange_lr=0.5)
+    tr = FinetuneTrainer(start, [["hr-rl"]], cfg)
+    assert tr.constrained and tr.cost_critic is not None and tr.lagrange == 0.0
+    column = CURVE_COLUMNS.index("lagrange")
+    tr.win_event = [Event.COLLISION] * 10 + [Event.SUCCESS] * 10  # 50 % > 10 %
+    assert tr.end_update()[column] == pytest.approx(0.5 * (0.5 - 0.1))
+    tr.win_event = [Event.SUCCESS] * 20  # 0 % < 10 %: λ falls, never below 0
+    lams = [tr.end_update()[column] for _ in range(6)]
+    assert lams == pytest.approx([0.15, 0.1, 0.05, 0.0, 0.0, 0.0])
+    plain = FinetuneTrainer(start, [["hr-rl"]], TINY)  # the default: unconstrained
+    plain.win_event = [Event.COLLISION] * 20
+    assert not plain.constrained and plain.cost_critic is None
+    assert plain.end_update()[column] == 0.0
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"replay": 0.5},  # "h?-r?": both paper worlds, prioritised
+        {"collision_limit": 0.0},  # PPO-Lagrangian: its cost critic and λ are saved too
+    ],
+    ids=["prioritised", "constrained"],
+)
+def test_a_resumed_run_equals_an_uninterrupted_one(
+    tmp_path: Path, change: dict[str, float]
+) -> None:
     src = _student(tmp_path)
-    cfg = dataclasses.replace(TINY, replay=0.5)  # "h?-r?": both paper worlds, prioritised
+    cfg = dataclasses.replace(TINY, **change)
     whole = finetune_student(src, ["h?-r?"], tmp_path / "a", cfg, progress=False)
     half = dataclasses.replace(cfg, total_steps=cfg.total_steps // 2)
     finetune_student(src, ["h?-r?"], tmp_path / "b", half, progress=False)
@@ -147,6 +181,11 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
     a = load_file(tmp_path / "a" / "student.safetensors")
     b = load_file(tmp_path / "b" / "student.safetensors")
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    a = load_file(tmp_path / "a" / "checkpoint.safetensors")  # the whole training state
+    b = load_file(tmp_path / "b" / "checkpoint.safetensors")
+    state = [k for k in a if k != "curve"]  # the curve (its wall times differ): below
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in state)
+    assert any(k.startswith("cost_critic/") for k in a) == ("collision_limit" in change)
     curves = [(tmp_path / d / "curve.csv").read_text().splitlines() for d in "ab"]
     assert [r.rsplit(",", 1)[0] for r in curves[0]] == [r.rsplit(",", 1)[0] for r in curves[1]]
     with pytest.raises(Exception, match="settings"):

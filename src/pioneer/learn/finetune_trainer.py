@@ -27,6 +27,7 @@ from pioneer.nn.layers import seeded_linear
 from pioneer.nn.ppo import (
     clipped_surrogate,
     compute_gae,
+    lagrangian_advantage,
     progress_state,
     restore_progress,
     window_row,
@@ -47,6 +48,7 @@ CURVE_COLUMNS = (
     "timeout_rate",
     "kl_coef",
     "std",
+    "lagrange",
     "wall_time_s",
 )
 FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
@@ -78,6 +80,11 @@ class FinetuneConfig(Config):
     # (prioritised layouts; 0: uniform)
     replay: UnitInterval = 0.0
     critic_hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # its widths
+    # the share of training episodes allowed to end in a collision: below 1, PPO-Lagrangian
+    # (a cost critic, advantages (A_r − λ A_c) / (1 + λ), λ raised while the running
+    # collision rate exceeds it); 1: the plain reward, unconstrained
+    collision_limit: UnitInterval = 1.0
+    lagrange_lr: Positive = 0.5  # λ's step per update per unit of excess collision rate
     reward: CrowdNavRewardConfig = FINETUNE_REWARD
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
     checkpoint_every: Count = 20  # [updates] between checkpoints
@@ -132,6 +139,17 @@ class FinetuneTrainer:
         actor_params = [*self.actor.parameters(), self.log_std]
         self.opt = torch.optim.Adam(actor_params, lr=cfg.lr, eps=1e-5)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
+        # PPO-Lagrangian's cost critic V_c (expected discounted collisions) and multiplier λ;
+        # seeded apart, so an unconstrained run is the run it always was
+        self.lagrange = 0.0
+        self.cost_critic: Critic | None = None
+        self.cost_opt: torch.optim.Adam | None = None
+        if self.constrained:
+            cost_gen = torch.Generator().manual_seed(cfg.seed + 2)
+            self.cost_critic = Critic(n_in, cfg.critic_hidden, cost_gen)
+            self.cost_opt = torch.optim.Adam(
+                self.cost_critic.parameters(), lr=cfg.critic_lr, eps=1e-5
+            )
         self.gen = torch.Generator().manual_seed(cfg.seed + 1)
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0xF17E]))
         self.envs = LayoutEnvs(
@@ -151,6 +169,11 @@ class FinetuneTrainer:
         self.win_return: list[float] = []
         self.win_event: list[int] = []
         self.curve: list[list[float]] = []
+
+    @property
+    def constrained(self) -> bool:
+        """Whether the collision constraint (PPO-Lagrangian) is on."""
+        return self.cfg.collision_limit < 1.0
 
     # -------------------------------------------------------------------- acting
     def _critic_in(self, x: torch.Tensor, priv: torch.Tensor) -> torch.Tensor:
@@ -176,6 +199,7 @@ class FinetuneTrainer:
         t_len, b = cfg.rollout, cfg.envs
         xs, privs, actions, logps = [], [], [], []
         values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
+        cost_values, costs = np.zeros((t_len, b)), np.zeros((t_len, b))
         std = torch.exp(self.log_std) * self.actor.act_std
         with torch.no_grad():
             for t in range(t_len):
@@ -184,8 +208,11 @@ class FinetuneTrainer:
                 mean = self.actor.deterministic_action(x, "mode")
                 action = mean + std * torch.randn(mean.shape, generator=self.gen)
                 values[t] = self.critic(self._critic_in(x, priv)).numpy()
+                if self.cost_critic is not None:
+                    cost_values[t] = self.cost_critic(self._critic_in(x, priv)).numpy()
                 r, event = envs.step(action.numpy().astype(np.float64))
                 rewards[t] = r
+                costs[t] = event == Event.COLLISION
                 done = event != Event.NONE
                 dones[t] = done
                 self.ep_return += r
@@ -199,19 +226,28 @@ class FinetuneTrainer:
             x = torch.from_numpy(envs.student_inputs())
             priv = torch.from_numpy(envs.privileged())
             last_value = self.critic(self._critic_in(x, priv)).numpy().astype(np.float64)
+            last_cost = np.zeros(b)
+            if self.cost_critic is not None:
+                last_cost = self.cost_critic(self._critic_in(x, priv)).numpy().astype(np.float64)
             x_all = torch.cat(xs)
             ref = self.ref.deterministic_action(x_all, "mode")
         self.env_steps += t_len * b
         adv, ret = compute_gae(rewards, values, dones, last_value, cfg.gamma, cfg.gae_lambda)
-        return {
+        batch = {
             "x": x_all,
             "priv": torch.cat(privs),
             "action": torch.cat(actions),
             "logp": torch.cat(logps),
             "ref": ref,
-            "adv": torch.from_numpy(adv.reshape(-1)).to(torch.float32),
-            "ret": torch.from_numpy(ret.reshape(-1)).to(torch.float32),
         }
+        if self.constrained:
+            gl = cfg.gamma, cfg.gae_lambda
+            adv_c, ret_c = compute_gae(costs, cost_values, dones, last_cost, *gl)
+            adv = lagrangian_advantage(adv, adv_c, self.lagrange)
+            batch["cost_ret"] = torch.from_numpy(ret_c.reshape(-1)).to(torch.float32)
+        batch["adv"] = torch.from_numpy(adv.reshape(-1)).to(torch.float32)
+        batch["ret"] = torch.from_numpy(ret.reshape(-1)).to(torch.float32)
+        return batch
 
     def _finish(self, ret: float, event: int) -> None:
         self.episodes += 1
@@ -242,6 +278,16 @@ class FinetuneTrainer:
                 self.critic_opt.step()
                 stats["value_loss"] += float(vl.detach())
                 steps += 1
+                if self.cost_critic is not None and self.cost_opt is not None:
+                    cost = self.cost_critic(self._critic_in(x, batch["priv"][idx]))
+                    cl = 0.5 * ((batch["cost_ret"][idx] - cost) ** 2).mean()
+                    self.cost_opt.zero_grad(set_to_none=True)
+                    cl.backward()
+                    nn.utils.clip_grad_norm_(self.cost_critic.parameters(), cfg.max_grad_norm)
+                    self.cost_opt.step()
+                    stats["cost_value_loss"] = stats.get("cost_value_loss", 0.0) + float(
+                        cl.detach()
+                    )
                 if not actor_on:
                     continue
                 mean = self.actor.deterministic_action(x, "mode")
@@ -260,24 +306,35 @@ class FinetuneTrainer:
         return {k: v / max(steps, 1) for k, v in stats.items()}
 
     def end_update(self) -> list[float]:
-        """Count the update, redraw the layouts when due, append the curve's row."""
+        """Count the update, redraw the layouts when due, move λ (when constrained), append
+        the curve's row."""
         self.update += 1
         if self.update % self.cfg.layout_period == 0:
             for g in range(self.cfg.groups):
                 self.envs.redraw(g)
             self.ep_return[:] = 0.0  # the cut episodes are not counted
         codes = (Event.SUCCESS, Event.COLLISION, Event.TIMEOUT)
+        stats = window_row(self.win_return, self.win_event, codes)
+        if self.constrained and not math.isnan(stats[2]):
+            self.lagrange = self.next_lagrange(stats[2])
         row = [
             float(self.update),
             float(self.env_steps),
             float(self.episodes),
-            *window_row(self.win_return, self.win_event, codes),
+            *stats,
             self.kl_coef(),
             float(torch.exp(self.log_std.detach()).mean()),
+            self.lagrange,
             self.wall,
         ]
         self.curve.append(row)
         return row
+
+    def next_lagrange(self, collision_rate: float) -> float:
+        """λ after one update: projected dual ascent, max(0, λ + ``lagrange_lr`` ·
+        (collision rate − ``collision_limit``)), the rate over the last ``window`` episodes."""
+        cfg = self.cfg
+        return max(0.0, self.lagrange + cfg.lagrange_lr * (collision_rate - cfg.collision_limit))
 
     # -------------------------------------------------------------------- checkpoint
     def settings(self, student_sha256: str) -> dict[str, Any]:
@@ -294,14 +351,20 @@ class FinetuneTrainer:
             for k, a in self.envs.arrays().items()
         }
         tensors["log_std"] = self.log_std.detach().clone()
+        tensors["lagrange"] = torch.tensor([self.lagrange], dtype=torch.float64)
+        modules = {"actor": self.actor, "ref": self.ref, "critic": self.critic}
+        optimizers = {"optim": self.opt, "critic_optim": self.critic_opt}
+        if self.cost_critic is not None and self.cost_opt is not None:
+            modules["cost_critic"] = self.cost_critic
+            optimizers["cost_critic_optim"] = self.cost_opt
         tensors["train/ep_return"] = torch.from_numpy(self.ep_return.copy())
         progress, meta = progress_state(self, len(CURVE_COLUMNS))
         tensors.update(progress)
         write_training_state(
             path,
             TRAIN_FORMAT,
-            modules={"actor": self.actor, "ref": self.ref, "critic": self.critic},
-            optimizers={"optim": self.opt, "critic_optim": self.critic_opt},
+            modules=modules,
+            optimizers=optimizers,
             tensors=tensors,
             meta={
                 "settings": settings,
@@ -325,13 +388,23 @@ class FinetuneTrainer:
                     "repeat the original command (see train.json) or use a new --out",
                 )
             )
-        for prefix, module in (("actor", self.actor), ("ref", self.ref), ("critic", self.critic)):
+        modules: list[tuple[str, nn.Module]] = [
+            ("actor", self.actor),
+            ("ref", self.ref),
+            ("critic", self.critic),
+        ]
+        if self.cost_critic is not None:
+            modules.append(("cost_critic", self.cost_critic))
+        for prefix, module in modules:
             sd = {k[len(prefix) + 1 :]: v for k, v in t.items() if k.startswith(prefix + "/")}
             module.load_state_dict(sd, strict=True)
         with torch.no_grad():
             self.log_std.copy_(t["log_std"])
+        self.lagrange = float(t["lagrange"][0])
         restore_optimizer(self.opt, t, meta, "optim")
         restore_optimizer(self.critic_opt, t, meta, "critic_optim")
+        if self.cost_opt is not None:
+            restore_optimizer(self.cost_opt, t, meta, "cost_critic_optim")
         env = {k[4:]: v.numpy() for k, v in t.items() if k.startswith("env/")}
         self.envs.restore(env, json.loads(meta["envs"]))
         self.ep_return = t["train/ep_return"].numpy().copy()

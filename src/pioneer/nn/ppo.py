@@ -29,6 +29,7 @@ __all__ = [
     "clipped_surrogate",
     "compute_gae",
     "curve_csv",
+    "lagrangian_advantage",
     "update_loop",
     "window_row",
 ]
@@ -64,6 +65,13 @@ def clipped_surrogate(
     """PPO's policy loss −E[min(ρ A, clip(ρ, 1 − ε, 1 + ε) A)], ρ = π/π_old (scalar)."""
     ratio = torch.exp(logp - old_logp)
     return -torch.min(ratio * adv, ratio.clamp(1 - clip, 1 + clip) * adv).mean()
+
+
+def lagrangian_advantage(adv: F64, cost_adv: F64, lagrange: float) -> F64:
+    """PPO-Lagrangian's advantage (Ray et al. 2019, "Benchmarking Safe Exploration in Deep
+    RL"): (A_r − λ A_c) / (1 + λ), the cost's advantage weighed by the multiplier λ ≥ 0 and
+    the sum rescaled so the policy's step does not grow with λ."""
+    return (adv - lagrange * cost_adv) / (1.0 + lagrange)
 
 
 def check_resume(resume: bool | None, ckpt: Path, out: Path) -> None:
