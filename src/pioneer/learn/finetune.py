@@ -27,6 +27,15 @@ Reward
     (``intrusion = 0``): +10 on success, −20 on a collision, 3 per metre towards the goal, the
     discomfort and spin costs. With the intrusion term waiting beside the door pays better than
     arriving (docs/baselines.md); without it, arriving pays most.
+Collision constraint (optional; ``collision_limit`` < 1)
+    PPO-Lagrangian (Ray et al. 2019): maximise the return subject to "at most the share
+    ``collision_limit`` of episodes end in a collision". A second critic V_c (the same
+    architecture and inputs) learns the discounted collision count (cost 1 on the colliding
+    step); the policy's advantage is (A_r − λ A_c) / (1 + λ)
+    (:func:`pioneer.nn.ppo.lagrangian_advantage`); after each update
+    λ ← max(0, λ + ``lagrange_lr`` · (c − ``collision_limit``)), c the collision rate of the
+    last ``window`` training episodes (under the exploration noise). The reward alone trades
+    a collision (−20) against time; the constraint states the risk allowed instead.
 PPO
     :mod:`pioneer.nn.ppo`'s GAE and clipped surrogate, γ = 0.99 and λ = 0.95 per 0.1 s step,
     clip 0.2, ``epochs`` passes of ``minibatches`` shuffled minibatches of the flattened
