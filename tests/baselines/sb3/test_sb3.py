@@ -344,3 +344,13 @@ def test_the_reward_without_intrusion_reaches_the_environments(tmp_path):
     res = run_cli("train", "sb3-ppo", *argv, "--out", str(out))
     assert res.returncode == 0, res.stderr
     assert json.loads((out / "train.json").read_text())["reward"] == "no-intrusion"
+
+
+def test_learning_writes_no_log_folder_of_sb3s_own(tmp_path, monkeypatch):
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where SB3's default logger writes
+    model, venv = _build(*env_id_for("hl-rr"), 1, 0)
+    model.learn(64)
+    venv.close()
+    assert not list(tmp_path.glob("SB3-*"))  # no /tmp/SB3-<time> per run

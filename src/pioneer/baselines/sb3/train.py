@@ -205,8 +205,13 @@ def _build(env_id: str, kwargs: Mapping[str, Any], n_envs: int, seed: int) -> tu
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
 
+    from stable_baselines3.common.logger import Logger
+
     venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=dict(kwargs))
-    return PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0), venv
+    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0)
+    # a logger of its own: SB3's default makes an empty folder /tmp/SB3-<time> on every learn()
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model, venv
 
 
 def _check_out(out: Path, resume: bool | None, settings: Mapping[str, Any]) -> bool:
