@@ -204,7 +204,6 @@ def _build(env_id: str, kwargs: Mapping[str, Any], n_envs: int, seed: int) -> tu
     """SB3's vector environment and ``PPO("MlpPolicy")`` as a fresh run makes them."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
-
     from stable_baselines3.common.logger import Logger
 
     venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=dict(kwargs))
