@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -165,12 +166,11 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
     [
         {"replay": 0.5},  # "h?-r?": both paper worlds, prioritised
         {"collision_limit": 0.0},  # PPO-Lagrangian: its cost critic and λ are saved too
+        {"replay": 0.5, "replay_mode": "plr"},  # level replay: the layouts seen are saved
     ],
-    ids=["prioritised", "constrained"],
+    ids=["prioritised", "constrained", "level-replay"],
 )
-def test_a_resumed_run_equals_an_uninterrupted_one(
-    tmp_path: Path, change: dict[str, float]
-) -> None:
+def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
     src = _student(tmp_path)
     cfg = dataclasses.replace(TINY, **change)
     whole = finetune_student(src, ["h?-r?"], tmp_path / "a", cfg, progress=False)
@@ -239,3 +239,24 @@ def test_prioritised_layouts_are_drawn_by_their_failure_rate(tmp_path: Path) -> 
     # replay 0.5: ½ · ½ uniform + ½ · (1 / 1.001) by failure ≈ 0.75 for the failing layout
     assert draws(0.5, {"hr-rl": 1.0, "hl-rr": 0.0}) == pytest.approx(0.75, abs=0.05)
     assert draws(1.0, {}) == pytest.approx(0.5, abs=0.05)  # unseen layouts weigh alike
+
+
+def test_level_replay_explores_unseen_layouts_and_replays_the_failing(tmp_path: Path) -> None:
+    model = load_student(_student(tmp_path))
+    pool = ["hr-rl", "hl-rr", "hr-rl-compact", "hl-rr-compact"]
+
+    def shares(failure: dict[str, float]) -> list[float]:
+        rng = np.random.default_rng(0)
+        envs = LayoutEnvs([pool], 1, 1, model.config.inputs, FINETUNE_REWARD, rng, 0, 6, 0.5, "plr")
+        envs.failure = failure
+        picks = np.array([envs._draw(pool) for _ in range(4000)])
+        return [float(np.mean(picks == i)) for i in range(len(pool))]
+
+    assert shares({}) == pytest.approx([0.25] * 4, abs=0.03)  # nothing seen: uniformly
+    # half the draws replay the seen layouts by failure (hr-rl: 3 of 4 parts), half explore the
+    # two never seen
+    seen = {"hr-rl": 0.75, "hl-rr": 0.25}
+    assert shares(seen) == pytest.approx([0.375, 0.125, 0.25, 0.25], abs=0.03)
+    # all seen: half replayed by failure, half uniformly over the pool
+    every = {"hr-rl": 1.0, "hl-rr": 0.0, "hr-rl-compact": 0.0, "hl-rr-compact": 0.0}
+    assert shares(every) == pytest.approx([0.5 + 0.125, 0.125, 0.125, 0.125], abs=0.03)

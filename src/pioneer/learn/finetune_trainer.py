@@ -20,7 +20,7 @@ from torch import nn
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
 from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
-from pioneer.learn.layout_env import LayoutEnvs, privileged_width
+from pioneer.learn.layout_env import LayoutEnvs, ReplayMode, privileged_width
 from pioneer.learn.models import Student
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
 from pioneer.nn.layers import seeded_linear
@@ -79,6 +79,10 @@ class FinetuneConfig(Config):
     # share of the layout draws made in proportion to each layout's running failure rate
     # (prioritised layouts; 0: uniform)
     replay: UnitInterval = 0.0
+    # "mix": the replayed share weighs every layout by its failure rate, one not yet seen
+    # counting as failing; "plr": the replayed share picks among the layouts already seen,
+    # the rest among those not yet seen (prioritised level replay)
+    replay_mode: ReplayMode = "mix"
     critic_hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # its widths
     # the share of training episodes allowed to end in a collision: below 1, PPO-Lagrangian
     # (a cost critic, advantages (A_r − λ A_c) / (1 + λ), λ raised while the running
@@ -162,6 +166,7 @@ class FinetuneTrainer:
             cfg.seed,
             MAX_HUMANS,
             cfg.replay,
+            cfg.replay_mode,
         )
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0

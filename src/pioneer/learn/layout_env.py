@@ -20,7 +20,7 @@ which the deployed student never sees.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,9 +32,11 @@ from pioneer.sim.events import Event, classify
 from pioneer.sim.scenarios import ScenarioConfig, get_scenario, sample_state
 from pioneer.sim.world import State, World, observe, step
 
-__all__ = ["HUMAN_FEATURES", "LayoutEnvs", "privileged", "privileged_width"]
+__all__ = ["HUMAN_FEATURES", "LayoutEnvs", "ReplayMode", "privileged", "privileged_width"]
 
 F32 = NDArray[np.float32]
+ReplayMode = Literal["mix", "plr"]
+"""How ``replay`` prioritises a pool's layouts (:meth:`LayoutEnvs._draw`)."""
 F64 = NDArray[np.float64]
 ROBOT_FEATURES = 6  # t / T, goal (x, y) in the robot's frame, its distance, (v, ω) last run
 # per person slot: position and velocity in the robot's frame, radius, present, not yet
@@ -119,13 +121,14 @@ class LayoutEnvs:
         seed: int,
         max_humans: int,
         replay: float = 0.0,
+        replay_mode: ReplayMode = "mix",
     ) -> None:
         self.names = [list(n) for n in names]
         self.size, self.inputs, self.reward = group_size, inputs, reward
         self.rng, self.seed, self.max_humans = rng, seed, max_humans
         self.episode_count = 0  # episodes started: the k of finetune_seed
         # prioritised layouts: each layout's running failure rate (1 until it is first seen)
-        self.replay = replay
+        self.replay, self.replay_mode = replay, replay_mode
         self.failure: dict[str, float] = {}
         self.groups: list[_Group] = []
         for _ in range(groups):
@@ -159,10 +162,23 @@ class LayoutEnvs:
         return _Group(name, state, obs_rng)
 
     def _draw(self, pool: list[str]) -> int:
-        """A layout of ``pool``: uniformly, or with probability ``replay`` in proportion to its
-        running failure rate (prioritised levels: Jiang et al., ICML 2021)."""
+        """A layout of ``pool`` (:data:`ReplayMode`): uniformly; or, ``"mix"``, with
+        probability ``replay`` in proportion to its running failure rate, a layout not yet
+        seen counting as failing; or, ``"plr"``, with probability ``replay`` a layout already
+        seen in proportion to its failure rate, else one not yet seen, uniformly (all seen:
+        any, uniformly) — prioritised level replay (Jiang et al., ICML 2021)."""
         if self.replay <= 0.0 or len(pool) == 1:
             return int(self.rng.integers(len(pool)))
+        if self.replay_mode == "plr":
+            seen = np.array([n in self.failure for n in pool])
+            if not seen.any():
+                return int(self.rng.integers(len(pool)))
+            if self.rng.random() < self.replay:  # replay: a seen layout by its failure rate
+                idx = np.flatnonzero(seen)
+                w = np.array([self.failure[pool[i]] for i in idx]) + 1e-3
+                return int(idx[self.rng.choice(idx.size, p=w / w.sum())])
+            explore = np.flatnonzero(~seen) if not seen.all() else np.arange(len(pool))
+            return int(explore[self.rng.integers(explore.size)])
         w = np.array([self.failure.get(n, 1.0) for n in pool]) + 1e-3
         p = (1.0 - self.replay) / len(pool) + self.replay * w / w.sum()
         return int(self.rng.choice(len(pool), p=p / p.sum()))
