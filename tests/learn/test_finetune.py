@@ -214,10 +214,13 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     src = _student(tmp_path)
     out = tmp_path / "run"
     args = ["--steps", "64", "--groups", "1", "--group-size", "2", "--rollout", "16"]
-    proc = run_cli("finetune", "--out", str(out), "--student", str(src), "--scenario", "hr-rl",
+    args += ["--collision-limit", "0.05", "--replay", "0.5", "--replay-mode", "plr"]
+    proc = run_cli("finetune", "--out", str(out), "--student", str(src), "--scenario", "h?-r?",
                    "--critic-warmup", "0", *args)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout.splitlines()[0])["updates"] == 2
+    settings = json.loads((out / "train.json").read_text())["settings"]["finetune"]
+    assert (settings["collision_limit"], settings["replay_mode"]) == (0.05, "plr")
     for name in ("student.safetensors", "checkpoint.safetensors", "curve.csv", "train.json"):
         assert (out / name).is_file()
     assert load_student(out / "student.safetensors").config == load_student(src).config
