@@ -346,14 +346,19 @@ def test_assumptions_the_world_already_holds_change_no_decision():
     assert a.event == b.event and a.steps == b.steps and a.path_length_m == b.path_length_m
 
 
+def _driven(seed: int, steps: int, command: list[float]):
+    """``(world, state)`` of HR-RL episode ``seed`` after ``steps`` steps of ``command``."""
+    env = NavEnv("hr-rl")
+    _, info = env.reset(seed=seed)
+    for _ in range(steps):
+        _, _, _, _, info = env.step(command)
+    return info["world"], info["state"]
+
+
 def test_assumptions_decide_as_the_teacher_of_the_assumed_world():
     # oracle: assuming (r >= 0.75 m, everyone reacting with A_r = 1.5) decides exactly as the
     # plain teacher does in a world and state that are so
-    env = NavEnv("hr-rl")
-    _, info = env.reset(seed=2)
-    for _ in range(25):
-        _, _, _, _, info = env.step([0.3, 0.0])
-    world, state = info["world"], info["state"]
+    world, state = _driven(2, 25, [0.3, 0.0])
     state = dataclasses.replace(state, h_reacts=np.zeros_like(state.h_reacts))  # nobody reacts
     sim = world.sim
     force = dataclasses.replace(sim.social_force, a_robot=1.5)
@@ -635,11 +640,7 @@ def test_patience_runs_out_after_its_time_without_progress():
 
 def test_an_impatient_teacher_decides_by_the_rule_terms_alone():
     # oracle: impatient, the teacher decides as the teacher without margins and learned term
-    env = NavEnv("hr-rl")
-    _, info = env.reset(seed=6)
-    for _ in range(20):
-        _, _, _, _, info = env.step([0.2, 0.0])
-    world, state = info["world"], info["state"]
+    world, state = _driven(6, 20, [0.2, 0.0])
     impatient = make_teacher("hr-rl", patience=0.5)
     impatient._progress = (0.0, float(state.t[0]) - 1.0)  # no progress for 1 s
     rules = make_teacher("hr-rl", density=False, human_margin=0.0, wall_margin=0.0, patience=0)
@@ -664,11 +665,7 @@ def test_an_impatient_teacher_holds_its_impatience_for_its_hold_time():
 
 def test_a_patient_teacher_that_keeps_its_margins_drops_only_the_learned_term():
     # oracle: impatient with keep_margins, the teacher decides as the teacher without R_den
-    env = NavEnv("hr-rl")
-    _, info = env.reset(seed=6)
-    for _ in range(20):
-        _, _, _, _, info = env.step([0.2, 0.0])
-    world, state = info["world"], info["state"]
+    world, state = _driven(6, 20, [0.2, 0.0])
     impatient = make_teacher("hr-rl", patience=0.5, patience_keep_margins=True)
     impatient._progress = (0.0, float(state.t[0]) - 1.0)  # no progress for 1 s
     rules = make_teacher("hr-rl", density=False, patience=0)

@@ -115,14 +115,14 @@ NETWORK_ERRORS = ("incomplete-download", "Connection", "ReadTimeout", "Max retri
 def install(job: Job, cmd: list[str], log: str, attempts: int = 3) -> str:
     """``job.run(cmd)``, run again (up to ``attempts`` in all, 10 s apart) when pip failed on
     the network; a failure of the package itself is raised at once."""
-    for attempt in range(1, attempts + 1):
+    for attempt in range(1, attempts):
         try:
             return job.run(cmd, log if attempt == 1 else f"{log}.{attempt}")
         except RuntimeError as exc:
-            if attempt == attempts or not any(e in str(exc) for e in NETWORK_ERRORS):
+            if not any(e in str(exc) for e in NETWORK_ERRORS):
                 raise
             time.sleep(10)
-    raise AssertionError("unreachable")
+    return job.run(cmd, log if attempts == 1 else f"{log}.{attempts}")
 
 
 def find_python(version: str) -> Path:

@@ -212,9 +212,10 @@ class FinetuneTrainer:
                 priv = torch.from_numpy(envs.privileged())
                 mean = self.actor.deterministic_action(x, "mode")
                 action = mean + std * torch.randn(mean.shape, generator=self.gen)
-                values[t] = self.critic(self._critic_in(x, priv)).numpy()
+                seen = self._critic_in(x, priv)
+                values[t] = self.critic(seen).numpy()
                 if self.cost_critic is not None:
-                    cost_values[t] = self.cost_critic(self._critic_in(x, priv)).numpy()
+                    cost_values[t] = self.cost_critic(seen).numpy()
                 r, event = envs.step(action.numpy().astype(np.float64))
                 rewards[t] = r
                 costs[t] = event == Event.COLLISION
@@ -230,10 +231,11 @@ class FinetuneTrainer:
                 logps.append(self._logp(mean, action))
             x = torch.from_numpy(envs.student_inputs())
             priv = torch.from_numpy(envs.privileged())
-            last_value = self.critic(self._critic_in(x, priv)).numpy().astype(np.float64)
+            seen = self._critic_in(x, priv)
+            last_value = self.critic(seen).numpy().astype(np.float64)
             last_cost = np.zeros(b)
             if self.cost_critic is not None:
-                last_cost = self.cost_critic(self._critic_in(x, priv)).numpy().astype(np.float64)
+                last_cost = self.cost_critic(seen).numpy().astype(np.float64)
             x_all = torch.cat(xs)
             ref = self.ref.deterministic_action(x_all, "mode")
         self.env_steps += t_len * b
@@ -275,24 +277,14 @@ class FinetuneTrainer:
             perm = torch.randperm(n, generator=self.gen)
             for idx in torch.tensor_split(perm, cfg.minibatches):
                 x = batch["x"][idx]
-                value = self.critic(self._critic_in(x, batch["priv"][idx]))
-                vl = 0.5 * ((batch["ret"][idx] - value) ** 2).mean()
-                self.critic_opt.zero_grad(set_to_none=True)
-                vl.backward()
-                nn.utils.clip_grad_norm_(self.critic.parameters(), cfg.max_grad_norm)
-                self.critic_opt.step()
-                stats["value_loss"] += float(vl.detach())
+                seen = self._critic_in(x, batch["priv"][idx])
+                ret = batch["ret"][idx]
+                stats["value_loss"] += self._regress(self.critic, self.critic_opt, seen, ret)
                 steps += 1
                 if self.cost_critic is not None and self.cost_opt is not None:
-                    cost = self.cost_critic(self._critic_in(x, batch["priv"][idx]))
-                    cl = 0.5 * ((batch["cost_ret"][idx] - cost) ** 2).mean()
-                    self.cost_opt.zero_grad(set_to_none=True)
-                    cl.backward()
-                    nn.utils.clip_grad_norm_(self.cost_critic.parameters(), cfg.max_grad_norm)
-                    self.cost_opt.step()
-                    stats["cost_value_loss"] = stats.get("cost_value_loss", 0.0) + float(
-                        cl.detach()
-                    )
+                    ret = batch["cost_ret"][idx]
+                    cl = self._regress(self.cost_critic, self.cost_opt, seen, ret)
+                    stats["cost_value_loss"] = stats.get("cost_value_loss", 0.0) + cl
                 if not actor_on:
                     continue
                 mean = self.actor.deterministic_action(x, "mode")
@@ -309,6 +301,18 @@ class FinetuneTrainer:
                 stats["policy_loss"] += float(pg.detach())
                 stats["pull"] += float(pull.detach())
         return {k: v / max(steps, 1) for k, v in stats.items()}
+
+    def _regress(
+        self, critic: Critic, opt: torch.optim.Optimizer, seen: torch.Tensor, target: torch.Tensor
+    ) -> float:
+        """One step of ``critic`` towards ``target`` (½ mean squared error, the gradient's norm
+        clipped); the loss."""
+        loss = 0.5 * ((target - critic(seen)) ** 2).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(critic.parameters(), self.cfg.max_grad_norm)
+        opt.step()
+        return float(loss.detach())
 
     def end_update(self) -> list[float]:
         """Count the update, redraw the layouts when due, move λ (when constrained), append
