@@ -14,6 +14,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
+from pioneer.control.teacher import make_teacher
 from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, finetune_student
 from pioneer.learn.finetune_trainer import CURVE_COLUMNS, FinetuneTrainer
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
@@ -167,8 +168,9 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         {"replay": 0.5},  # "h?-r?": both paper worlds, prioritised
         {"collision_limit": 0.0},  # PPO-Lagrangian: its cost critic and λ are saved too
         {"replay": 0.5, "replay_mode": "plr"},  # level replay: the layouts seen are saved
+        {"teacher_coef": 1.0, "teacher_alpha": 2.0},  # teacher guidance
     ],
-    ids=["prioritised", "constrained", "level-replay"],
+    ids=["prioritised", "constrained", "level-replay", "teacher-guided"],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
     src = _student(tmp_path)
@@ -192,6 +194,56 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[
         finetune_student(
             src, ["h?-r?"], tmp_path / "b", dataclasses.replace(cfg, lr=1e-3), progress=False
         )
+
+
+def test_the_teacher_labels_are_its_decisions_in_those_copies(tmp_path: Path) -> None:
+    model = load_student(_student(tmp_path))
+    rng = np.random.default_rng(2)
+    envs = LayoutEnvs([["hl-rr"]], 2, 3, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
+    for _ in range(5):  # people moving, a command run
+        envs.step(np.tile([0.5, -0.2], (6, 1)))
+    copies = np.array([0, 4])
+    labels = envs.teacher_labels(copies)
+    teacher = make_teacher("hl-rr")  # brute force: a fresh teacher per copy
+    for k, i in enumerate(copies):
+        grp = envs.groups[i // 3]
+        state = grp.state.take(int(i) % 3)
+        np.testing.assert_array_equal(state.command[0], [0.5, -0.2])
+        want = make_teacher("hl-rr").decide(grp.world, state, prev=state.command[0]).command
+        np.testing.assert_array_equal(labels[k], want)
+        # the label is DAgger's: half the teacher's best, half the command run
+        best = teacher.decide(grp.world, state, prev=np.zeros(2)).best
+        np.testing.assert_allclose(labels[k], 0.5 * best + 0.5 * np.array([0.5, -0.2]))
+
+
+def test_the_guidance_weighs_each_label_by_the_dagger_students_distance(tmp_path: Path) -> None:
+    start = load_student(_student(tmp_path))
+    cfg = dataclasses.replace(TINY, teacher_coef=1.0, teacher_alpha=2.0, teacher_groups=5)
+    tr = FinetuneTrainer(start, [["hr-rl"]], cfg)
+    assert tr.guided and list(tr._taught()) == [0, 2]  # one copy per group, two groups
+    assert not FinetuneTrainer(start, [["hr-rl"]], TINY).guided  # the default: off
+    s_u = start.act_std
+    ref = torch.zeros(2 * 4, 2)  # T = 2 steps, B = 4 copies
+    labels = np.zeros((2, 4, 2))
+    labels[0, 0] = (0.5 * s_u).numpy()  # d² = 0.25 + 0.25
+    labels[1, 2] = (torch.tensor([1.0, 0.0]) * s_u).numpy()  # d² = 1
+    g = tr._guidance(labels, tr._taught(), ref)
+    assert g["taught"].tolist() == [True, False, True, False] * 2
+    want = torch.ones(8)
+    want[0], want[6] = math.exp(-2.0 * 0.5), math.exp(-2.0 * 1.0)
+    torch.testing.assert_close(g["label_w"], want)
+    # the loss: the weighted mean over the labelled rows of the pull's ½ ‖·/(s_u σ_0)‖²
+    scale = s_u * cfg.init_std
+    mean = torch.zeros(8, 2)
+    mean[2] = 0.4 * scale  # a labelled row 0.4 σ_0 off its label (0) in each command
+    got = FinetuneTrainer._imitation(mean, g, torch.arange(8), scale)
+    errs = [0.5 * ((labels.reshape(8, 2)[i] / scale.numpy()) ** 2).sum() for i in (0, 4, 6)]
+    errs.append(0.5 * 2 * 0.4**2)  # row 2
+    weights = [want[0], 1.0, want[6], 1.0]
+    expected = sum(float(w) * e for w, e in zip(weights, errs, strict=True)) / 4
+    assert float(got) == pytest.approx(expected, rel=1e-5)
+    none = FinetuneTrainer._imitation(mean, g, torch.tensor([1, 3]), scale)
+    assert float(none) == 0.0  # no labelled row in the minibatch
 
 
 def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Path) -> None:

@@ -36,6 +36,17 @@ Collision constraint (optional; ``collision_limit`` < 1)
     λ ← max(0, λ + ``lagrange_lr`` · (c − ``collision_limit``)), c the collision rate of the
     last ``window`` training episodes (under the exploration noise). The reward alone trades
     a collision (−20) against time; the constraint states the risk allowed instead.
+Teacher guidance (optional; ``teacher_coef`` > 0)
+    The privileged teacher labels one copy in each of the first ``teacher_groups`` groups every
+    step (:meth:`~pioneer.learn.layout_env.LayoutEnvs.teacher_labels`: DAgger's label, on the
+    states the fine-tuned student visits), and the actor's loss gains
+    β_T · mean over the labelled rows of w(x) · ½ ‖(μ(x) − u_T) / (s_u σ_0)‖² with β_T =
+    ``teacher_coef``, constant. The weight w(x) = exp(−α ‖(μ_0(x) − u_T) / s_u‖²),
+    α = ``teacher_alpha``, follows ADVISOR (Weihs et al., arXiv 2007.12173): the DAgger
+    student μ_0, trained to imitate the teacher, measures where the teacher can be imitated from
+    what the student sees; where it could not, the imitation yields to the return (α = 0:
+    imitate everywhere, a fixed-weight teacher-guided RL as in TGRL, arXiv 2307.03186). Unlike
+    the pull, which keeps the DAgger student, it teaches in the states the student now reaches.
 PPO
     :mod:`pioneer.nn.ppo`'s GAE and clipped surrogate, γ = 0.99 and λ = 0.95 per 0.1 s step,
     clip 0.2, ``epochs`` passes of ``minibatches`` shuffled minibatches of the flattened

@@ -15,6 +15,7 @@ from typing import Annotated, Any
 import numpy as np
 import torch
 from annotated_types import MinLen
+from numpy.typing import NDArray
 from torch import nn
 
 from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
@@ -53,6 +54,7 @@ CURVE_COLUMNS = (
 )
 FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
 MAX_HUMANS = 6  # person slots of the critic's privileged view
+F64 = NDArray[np.float64]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,6 +91,13 @@ class FinetuneConfig(Config):
     # collision rate exceeds it); 1: the plain reward, unconstrained
     collision_limit: UnitInterval = 1.0
     lagrange_lr: Positive = 0.5  # λ's step per update per unit of excess collision rate
+    # teacher guidance: β_T of the imitation of the privileged teacher's label in the copies it
+    # labels (0: off); one copy in each of the first ``teacher_groups`` groups is labelled
+    # every step; ``teacher_alpha`` α of the per-state weight exp(−α d²), d the distance
+    # between the DAgger student's command and the label in standardised units (0: weight 1)
+    teacher_coef: NonNegative = 0.0
+    teacher_groups: Count = 4
+    teacher_alpha: NonNegative = 0.0
     reward: CrowdNavRewardConfig = FINETUNE_REWARD
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
     checkpoint_every: Count = 20  # [updates] between checkpoints
@@ -176,6 +185,16 @@ class FinetuneTrainer:
         self.curve: list[list[float]] = []
 
     @property
+    def guided(self) -> bool:
+        """Whether the teacher's labels guide the actor (teacher guidance)."""
+        return self.cfg.teacher_coef > 0.0
+
+    def _taught(self) -> NDArray[np.int64]:
+        """The copies the teacher labels: the first of each of the first ``teacher_groups``."""
+        cfg = self.cfg
+        return np.arange(min(cfg.teacher_groups, cfg.groups), dtype=np.int64) * cfg.group_size
+
+    @property
     def constrained(self) -> bool:
         """Whether the collision constraint (PPO-Lagrangian) is on."""
         return self.cfg.collision_limit < 1.0
@@ -205,6 +224,8 @@ class FinetuneTrainer:
         xs, privs, actions, logps = [], [], [], []
         values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
         cost_values, costs = np.zeros((t_len, b)), np.zeros((t_len, b))
+        taught = self._taught() if self.guided else np.zeros(0, dtype=np.int64)
+        labels = np.zeros((t_len, b, 2))
         std = torch.exp(self.log_std) * self.actor.act_std
         with torch.no_grad():
             for t in range(t_len):
@@ -216,6 +237,8 @@ class FinetuneTrainer:
                 values[t] = self.critic(seen).numpy()
                 if self.cost_critic is not None:
                     cost_values[t] = self.cost_critic(seen).numpy()
+                if taught.size:
+                    labels[t, taught] = envs.teacher_labels(taught)
                 r, event = envs.step(action.numpy().astype(np.float64))
                 rewards[t] = r
                 costs[t] = event == Event.COLLISION
@@ -252,9 +275,30 @@ class FinetuneTrainer:
             adv_c, ret_c = compute_gae(costs, cost_values, dones, last_cost, *gl)
             adv = lagrangian_advantage(adv, adv_c, self.lagrange)
             batch["cost_ret"] = torch.from_numpy(ret_c.reshape(-1)).to(torch.float32)
+        if taught.size:
+            batch.update(self._guidance(labels, taught, ref))
         batch["adv"] = torch.from_numpy(adv.reshape(-1)).to(torch.float32)
         batch["ret"] = torch.from_numpy(ret.reshape(-1)).to(torch.float32)
         return batch
+
+    def _guidance(
+        self, labels: F64, taught: NDArray[np.int64], ref: torch.Tensor
+    ) -> dict[str, torch.Tensor]:
+        """The rollout's teacher labels ``(T, B, 2)`` as batch entries: ``taught`` (N,) which
+        rows carry one, ``label`` (N, 2), and ``label_w`` (N,) their ADVISOR-style weight
+        exp(−α d²), d = ‖(μ_0(x) − label) / s_u‖ the DAgger student's distance from the label:
+        where the student taught by the teacher could not follow it, the imitation yields to
+        the return (Weihs et al., arXiv 2007.12173)."""
+        t_len, b = labels.shape[:2]
+        mask = np.zeros((t_len, b), dtype=np.bool_)
+        mask[:, taught] = True
+        label = torch.from_numpy(labels.reshape(-1, 2)).to(torch.float32)
+        d2 = (((ref - label) / self.actor.act_std) ** 2).sum(-1)
+        return {
+            "taught": torch.from_numpy(mask.reshape(-1)),
+            "label": label,
+            "label_w": torch.exp(-self.cfg.teacher_alpha * d2),
+        }
 
     def _finish(self, ret: float, event: int) -> None:
         self.episodes += 1
@@ -271,6 +315,8 @@ class FinetuneTrainer:
         adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         n = adv.shape[0]
         stats = {"policy_loss": 0.0, "value_loss": 0.0, "pull": 0.0}
+        if self.guided:
+            stats["imitation"] = 0.0
         steps = 0
         scale = self.actor.act_std * cfg.init_std
         for _ in range(cfg.epochs):
@@ -292,6 +338,10 @@ class FinetuneTrainer:
                 pg = clipped_surrogate(logp, batch["logp"][idx], adv[idx], cfg.clip)
                 pull = 0.5 * (((mean - batch["ref"][idx]) / scale) ** 2).sum(-1).mean()
                 loss = pg + beta * pull
+                if "taught" in batch:
+                    imitation = self._imitation(mean, batch, idx, scale)
+                    loss = loss + cfg.teacher_coef * imitation
+                    stats["imitation"] += float(imitation.detach())
                 self.opt.zero_grad(set_to_none=True)
                 loss.backward()
                 nn.utils.clip_grad_norm_(
@@ -301,6 +351,18 @@ class FinetuneTrainer:
                 stats["policy_loss"] += float(pg.detach())
                 stats["pull"] += float(pull.detach())
         return {k: v / max(steps, 1) for k, v in stats.items()}
+
+    @staticmethod
+    def _imitation(
+        mean: torch.Tensor, batch: dict[str, torch.Tensor], idx: torch.Tensor, scale: torch.Tensor
+    ) -> torch.Tensor:
+        """The teacher guidance's loss on a minibatch: the weighted mean over its labelled rows
+        of ½ ‖(μ(x) − label) / (s_u σ_0)‖² (the pull's scale); 0 without a labelled row."""
+        m = batch["taught"][idx]
+        if not bool(m.any()):
+            return mean.sum() * 0.0
+        err = 0.5 * (((mean[m] - batch["label"][idx][m]) / scale) ** 2).sum(-1)
+        return (batch["label_w"][idx][m] * err).mean()
 
     def _regress(
         self, critic: Critic, opt: torch.optim.Optimizer, seen: torch.Tensor, target: torch.Tensor

@@ -14,7 +14,8 @@ Each step the copies read what the student reads (:class:`~pioneer.deploy.runtim
 o_t, and if it was trained with them o_{t−1} — o_t at an episode's first step — and the
 command the robot ran, 0 at the first step), as :class:`~pioneer.learn.policy.StudentPolicy`
 and the robot runtime give it. :func:`privileged` is the critic's extra view of the state,
-which the deployed student never sees.
+which the deployed student never sees. :meth:`LayoutEnvs.teacher_labels` is what the
+privileged teacher would command in chosen copies (teacher-guided fine-tuning).
 """
 
 from __future__ import annotations
@@ -130,6 +131,7 @@ class LayoutEnvs:
         # prioritised layouts: each layout's running failure rate (1 until it is first seen)
         self.replay, self.replay_mode = replay, replay_mode
         self.failure: dict[str, float] = {}
+        self._teachers: dict[str, Any] = {}  # the teacher per base scenario (its reward's)
         self.groups: list[_Group] = []
         for _ in range(groups):
             self.groups.append(self._new_group())
@@ -210,6 +212,26 @@ class LayoutEnvs:
         return np.concatenate(
             [privileged(g.state, g.world.sim.time_limit, self.max_humans) for g in self.groups]
         )
+
+    def teacher_labels(self, copies: NDArray[np.int64]) -> F64:
+        """The teacher's command ``(len(copies), 2)`` in each of ``copies`` now: the default
+        teacher (:func:`~pioneer.control.teacher.make_teacher`, the reward of the layout's base
+        scenario) from the privileged state and world, smoothed with the command the copy last
+        ran — the label DAgger gives (:mod:`pioneer.learn.dagger`)."""
+        from pioneer.sim.scenarios import scenario_base
+
+        out = np.zeros((len(copies), 2))
+        for k, i in enumerate(copies):
+            grp = self.groups[int(i) // self.size]
+            base = scenario_base(grp.name)
+            if base not in self._teachers:
+                from pioneer.control.teacher import make_teacher
+
+                self._teachers[base] = make_teacher(base)
+            state = grp.state.take(int(i) % self.size)
+            decision = self._teachers[base].decide(grp.world, state, prev=state.command[0])
+            out[k] = decision.command
+        return out
 
     def step(self, commands: F64) -> tuple[F64, NDArray[np.int8]]:
         """Run ``commands (n, 2)`` one control period: the rewards ``(n,)`` and event codes
