@@ -77,7 +77,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from pioneer.errors import ConfigError, DataError, expect
@@ -97,7 +96,7 @@ from pioneer.learn.finetune_trainer import (
     FinetuneTrainer,
 )
 from pioneer.learn.models import load_student, read_checkpoint_meta, save_student
-from pioneer.nn.ppo import check_resume, curve_csv, update_loop
+from pioneer.nn.ppo import check_resume, curve_columns, curve_csv, update_loop
 
 __all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "FinetuneConfig", "finetune_student"]
 
@@ -111,9 +110,8 @@ def _write_outputs(tr: FinetuneTrainer, out: Path, info: dict[str, Any], final: 
     if final:
         from pioneer.viz.plots import plot_learning_curve
 
-        arr = np.asarray(tr.curve, dtype=np.float64).reshape(-1, len(CURVE_COLUMNS))
         plot_learning_curve(
-            {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
+            curve_columns(CURVE_COLUMNS, tr.curve),
             out / "curve.png",
             title=f"student fine-tuning · {sum(map(len, tr.names))} scenario(s)",
         )

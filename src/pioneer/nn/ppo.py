@@ -28,6 +28,7 @@ __all__ = [
     "check_resume",
     "clipped_surrogate",
     "compute_gae",
+    "curve_columns",
     "curve_csv",
     "lagrangian_advantage",
     "update_loop",
@@ -95,6 +96,13 @@ def curve_csv(columns: Sequence[str], rows: Sequence[Sequence[float]], ints: int
     for r in rows:
         w.writerow([*(int(x) for x in r[:ints]), *(f"{x:.6g}" for x in r[ints:])])
     return buf.getvalue()
+
+
+def curve_columns(columns: Sequence[str], rows: Sequence[Sequence[float]]) -> dict[str, F64]:
+    """A learning curve's rows as one array per column (what
+    :func:`pioneer.viz.plots.plot_learning_curve` plots)."""
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, len(columns))
+    return {c: arr[:, i] for i, c in enumerate(columns)}
 
 
 def window_row(

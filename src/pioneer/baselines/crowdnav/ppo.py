@@ -80,7 +80,6 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from pioneer.baselines.crowdnav.imitation import WarmStartConfig
@@ -88,7 +87,7 @@ from pioneer.baselines.crowdnav.network import CrowdNavConfig, save_crowdnav
 from pioneer.baselines.crowdnav.trainer import CURVE_COLUMNS, PPOConfig, _Trainer, compute_gae
 from pioneer.interrupt import Interrupted
 from pioneer.io import output_dir_kind, run_lock, to_json, write_text_atomic
-from pioneer.nn.ppo import check_resume, curve_csv, update_loop
+from pioneer.nn.ppo import check_resume, curve_columns, curve_csv, update_loop
 from pioneer.reward.crowdnav import CrowdNavRewardConfig
 from pioneer.sim.scenarios import get_scenario
 
@@ -103,9 +102,8 @@ def _write_outputs(tr: _Trainer, out: Path, info: Mapping[str, Any], final: bool
     if final:
         from pioneer.viz.plots import plot_learning_curve
 
-        arr = np.asarray(tr.curve, dtype=np.float64).reshape(-1, len(CURVE_COLUMNS))
         plot_learning_curve(
-            {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
+            curve_columns(CURVE_COLUMNS, tr.curve),
             out / "curve.png",
             title=f"CrowdNav++ · {tr.scenario.name} · "
             + ("imitation + PPO" if tr.warm.bc_episodes else "PPO"),

@@ -30,6 +30,7 @@ from pioneer.io import (
     to_json,
     write_text_atomic,
 )
+from pioneer.nn.ppo import curve_columns
 from pioneer.registration import ENV_IDS, register_envs
 from pioneer.reward.crowdnav import REWARDS, RewardName
 
@@ -368,9 +369,8 @@ def _write_outputs(model: Any, out: Path, summary: dict[str, Any], curve: CurveS
     from pioneer.viz.plots import plot_learning_curve
 
     save_policy(model.policy, out / "policy.safetensors", summary)
-    arr = np.asarray(curve.rows, dtype=np.float64).reshape(-1, len(CURVE_COLUMNS))
     plot_learning_curve(
-        {c: arr[:, i] for i, c in enumerate(CURVE_COLUMNS)},
+        curve_columns(CURVE_COLUMNS, curve.rows),
         out / "curve.png",
         title=f"Stable-Baselines3 PPO · {summary['scenario']}",
     )
