@@ -260,6 +260,16 @@ def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Pa
                       "--scenario", "no-such-world")  # fmt: skip
     one_error_line(unknown.stderr, unknown.returncode, "no-such-world")
     assert file_tree(tmp_path) == before
+    # teacher guidance in a layout whose teacher has no reward (a variant with no base)
+    variants = tmp_path / "variants.json"
+    variants.write_text(json.dumps({"format": "pioneer.scenarios/1",
+                                    "scenarios": {"lobby-x": {"elevator": {}}}}))  # fmt: skip
+    proc = run_cli("--scenarios", str(variants), "finetune", "--out", str(tmp_path / "g"),
+                   "--student", str(src), "--scenario", "lobby-x",
+                   "--teacher-coef", "1")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "--teacher-coef")
+    variants.unlink()
+    assert file_tree(tmp_path) == before
 
 
 def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
@@ -267,12 +277,14 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     out = tmp_path / "run"
     args = ["--steps", "64", "--groups", "1", "--group-size", "2", "--rollout", "16"]
     args += ["--collision-limit", "0.05", "--replay", "0.5", "--replay-mode", "plr"]
+    args += ["--teacher-coef", "0.5", "--teacher-alpha", "2", "--teacher-groups", "1"]
     proc = run_cli("finetune", "--out", str(out), "--student", str(src), "--scenario", "h?-r?",
                    "--critic-warmup", "0", *args)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout.splitlines()[0])["updates"] == 2
     settings = json.loads((out / "train.json").read_text())["settings"]["finetune"]
     assert (settings["collision_limit"], settings["replay_mode"]) == (0.05, "plr")
+    assert (settings["teacher_coef"], settings["teacher_alpha"]) == (0.5, 2.0)
     for name in ("student.safetensors", "checkpoint.safetensors", "curve.csv", "train.json"):
         assert (out / name).is_file()
     assert load_student(out / "student.safetensors").config == load_student(src).config

@@ -155,6 +155,22 @@ def finetune_student(
                 "fine-tune a student of these scenarios' LiDAR",
             )
         )
+    if cfg.teacher_coef > 0.0:  # the guiding teacher plans with its base's shipped reward
+        from pioneer.data import shipped_demos
+        from pioneer.sim.scenarios import scenario_base
+
+        for base in sorted({scenario_base(n) for pool in names for n in pool}):
+            try:
+                shipped_demos(base)
+            except DataError:
+                raise DataError(
+                    expect(
+                        "--teacher-coef: the guiding teacher's reward",
+                        "scenarios whose base has shipped demos",
+                        base,
+                        "give the variant a built-in 'base' or drop --teacher-coef",
+                    )
+                ) from None
     out = output_dir_kind(out_dir)
     check_not_input(out / "student.safetensors", [src])
     ckpt = out / "checkpoint.safetensors"
