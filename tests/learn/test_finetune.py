@@ -47,8 +47,10 @@ TINY = FinetuneConfig(
 )
 
 
-def _student(tmp_path: Path, **kw: object) -> Path:
-    cfg = StudentConfig(hidden=(16,), previous_observation=True, previous_command=True, **kw)
+def _student(tmp_path: Path, symmetric: bool = False) -> Path:
+    cfg = StudentConfig(
+        hidden=(16,), previous_observation=True, previous_command=True, symmetric=symmetric
+    )
     model = build_student(cfg, seed=3)
     gen = torch.Generator().manual_seed(0)
     model.set_normalizer(torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2))
@@ -125,7 +127,8 @@ def test_a_symmetric_student_stays_mirror_equivariant(tmp_path: Path) -> None:
     src = _student(tmp_path, symmetric=True)
     finetune_student(src, ["hr-rl", "hl-rr"], tmp_path / "run", TINY, progress=False)
     model = load_student(tmp_path / "run" / "student.safetensors")
-    assert not torch.equal(model.state_dict()["mu_head.weight"], load_student(src).mu_head.weight)
+    before = load_student(src).state_dict()["mu_head.weight"]
+    assert not torch.equal(model.state_dict()["mu_head.weight"], before)
     rng = np.random.default_rng(1)
     envs = LayoutEnvs([["hr-rl"]], 1, 8, model.config.inputs, FINETUNE_REWARD, rng, 0, 6)
     rows = []
@@ -151,13 +154,13 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
     tr = FinetuneTrainer(start, [["hr-rl"]], cfg)
     assert tr.constrained and tr.cost_critic is not None and tr.lagrange == 0.0
     column = CURVE_COLUMNS.index("lagrange")
-    tr.win_event = [Event.COLLISION] * 10 + [Event.SUCCESS] * 10  # 50 % > 10 %
+    tr.win_event = [int(Event.COLLISION)] * 10 + [int(Event.SUCCESS)] * 10  # 50 % > 10 %
     assert tr.end_update()[column] == pytest.approx(0.5 * (0.5 - 0.1))
-    tr.win_event = [Event.SUCCESS] * 20  # 0 % < 10 %: λ falls, never below 0
+    tr.win_event = [int(Event.SUCCESS)] * 20  # 0 % < 10 %: λ falls, never below 0
     lams = [tr.end_update()[column] for _ in range(6)]
     assert lams == pytest.approx([0.15, 0.1, 0.05, 0.0, 0.0, 0.0])
     plain = FinetuneTrainer(start, [["hr-rl"]], TINY)  # the default: unconstrained
-    plain.win_event = [Event.COLLISION] * 20
+    plain.win_event = [int(Event.COLLISION)] * 20
     assert not plain.constrained and plain.cost_critic is None
     assert plain.end_update()[column] == 0.0
 
@@ -239,8 +242,8 @@ def test_the_guidance_weighs_each_label_by_the_dagger_students_distance(tmp_path
     got = FinetuneTrainer._imitation(mean, g, torch.arange(8), scale)
     errs = [0.5 * ((labels.reshape(8, 2)[i] / scale.numpy()) ** 2).sum() for i in (0, 4, 6)]
     errs.append(0.5 * 2 * 0.4**2)  # row 2
-    weights = [want[0], 1.0, want[6], 1.0]
-    expected = sum(float(w) * e for w, e in zip(weights, errs, strict=True)) / 4
+    weights = [float(want[0]), 1.0, float(want[6]), 1.0]
+    expected = sum(w * e for w, e in zip(weights, errs, strict=True)) / 4
     assert float(got) == pytest.approx(expected, rel=1e-5)
     none = FinetuneTrainer._imitation(mean, g, torch.tensor([1, 3]), scale)
     assert float(none) == 0.0  # no labelled row in the minibatch
