@@ -622,3 +622,17 @@ def test_the_exiting_passenger_example_changes_only_the_exiting_passenger(clean_
         assert [h for h in world.humans if h.role == "boarding"] == [
             h for h in base.humans if h.role == "boarding"
         ]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from(["hr-rl", "hl-rr", "static"]))
+def test_the_batched_wall_distances_are_the_single_ones_bit_for_bit(seed: int, name: str) -> None:
+    # the start-state check measures all bodies at once; it must decide exactly as one at a time
+    from pioneer.sim.scenarios.spec import _wall_distance, _wall_distances
+
+    walls = get_scenario(name).world().walls
+    pts = np.random.default_rng(seed).uniform(-4.0, 4.0, (7, 2))
+    batched = _wall_distances(pts, walls)
+    np.testing.assert_array_equal(batched, [_wall_distance(p, walls) for p in pts])
+    np.testing.assert_allclose(batched, wall_distances(pts, walls).min(-1), rtol=1e-12)
+    assert np.all(np.isinf(_wall_distances(pts, walls[:0])))

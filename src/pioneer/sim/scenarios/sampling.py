@@ -8,7 +8,12 @@ import numpy as np
 
 from pioneer.errors import ScenarioError, expect
 from pioneer.sim.humans import ARRIVED, WALKING
-from pioneer.sim.scenarios.spec import MAX_TRIES, ScenarioConfig, _wall_distance
+from pioneer.sim.scenarios.spec import (
+    MAX_TRIES,
+    ScenarioConfig,
+    _wall_distance,
+    _wall_distances,
+)
 from pioneer.sim.world import State
 
 
@@ -104,10 +109,11 @@ def _min_gap(p_r: np.ndarray, pos: np.ndarray, cfg: ScenarioConfig, r_r: float) 
 def _initial_state_ok(
     cfg: ScenarioConfig, walls: np.ndarray, p_r: np.ndarray, pos: np.ndarray, gap: float, r_r: float
 ) -> bool:
-    if _wall_distance(p_r, walls) < r_r + gap:
+    clear = _wall_distances(np.vstack([p_r[None], pos[: len(cfg.humans)]]), walls)
+    if clear[0] < r_r + gap:
         return False
     for i, h in enumerate(cfg.humans):
-        if _wall_distance(pos[i], walls) < h.radius + gap:
+        if clear[1 + i] < h.radius + gap:
             return False
         if np.linalg.norm(pos[i] - p_r) < h.radius + r_r + gap:
             return False

@@ -163,3 +163,15 @@ def _wall_distance(p: np.ndarray, walls: np.ndarray) -> float:
     ll = np.maximum(np.einsum("ij,ij->i", e, e), 1e-18)
     s = np.clip(np.einsum("ij,ij->i", p - a, e) / ll, 0.0, 1.0)
     return float(np.min(np.linalg.norm(a + s[:, None] * e - p, axis=1)))
+
+
+def _wall_distances(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """:func:`_wall_distance` of each of ``points (P, 2)`` at once, ``(P,)``: the same
+    arithmetic element for element, so the same bits (tested), in one pass over the walls."""
+    if walls.shape[0] == 0:
+        return np.full(points.shape[0], math.inf)
+    a = walls[:, :2]
+    e = walls[:, 2:] - a
+    ll = np.maximum(np.einsum("ij,ij->i", e, e), 1e-18)
+    s = np.clip(np.einsum("pij,ij->pi", points[:, None, :] - a, e) / ll, 0.0, 1.0)
+    return np.min(np.linalg.norm(a + s[..., None] * e - points[:, None, :], axis=-1), axis=1)
