@@ -119,6 +119,12 @@ class FinetuneConfig(Config):
         return -(-self.total_steps // self.steps_per_update)
 
 
+def _half_square(mean: torch.Tensor, target: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    """½ ‖(mean − target) / scale‖² per row ``(N,)``: the KL divergence between two Gaussians
+    of standard deviation ``scale`` (the pull's and the teacher guidance's loss)."""
+    return 0.5 * (((mean - target) / scale) ** 2).sum(-1)
+
+
 class Critic(nn.Module):
     """V(x, s): an MLP of the student's standardised inputs and the privileged features."""
 
@@ -336,7 +342,7 @@ class FinetuneTrainer:
                 mean = self.actor.deterministic_action(x, "mode")
                 logp = self._logp(mean, batch["action"][idx])
                 pg = clipped_surrogate(logp, batch["logp"][idx], adv[idx], cfg.clip)
-                pull = 0.5 * (((mean - batch["ref"][idx]) / scale) ** 2).sum(-1).mean()
+                pull = _half_square(mean, batch["ref"][idx], scale).mean()
                 loss = pg + beta * pull
                 if "taught" in batch:
                     imitation = self._imitation(mean, batch, idx, scale)
@@ -361,7 +367,7 @@ class FinetuneTrainer:
         m = batch["taught"][idx]
         if not bool(m.any()):
             return mean.sum() * 0.0
-        err = 0.5 * (((mean[m] - batch["label"][idx][m]) / scale) ** 2).sum(-1)
+        err = _half_square(mean[m], batch["label"][idx][m], scale)
         return (batch["label_w"][idx][m] * err).mean()
 
     def _regress(

@@ -156,18 +156,12 @@ def _fits(region: Region, walls: np.ndarray, clearance: float, rng: np.random.Ge
 
 
 def _wall_distance(p: np.ndarray, walls: np.ndarray) -> float:
-    if walls.shape[0] == 0:
-        return math.inf
-    a = walls[:, :2]
-    e = walls[:, 2:] - a
-    ll = np.maximum(np.einsum("ij,ij->i", e, e), 1e-18)
-    s = np.clip(np.einsum("ij,ij->i", p - a, e) / ll, 0.0, 1.0)
-    return float(np.min(np.linalg.norm(a + s[:, None] * e - p, axis=1)))
+    return float(_wall_distances(np.asarray(p, dtype=np.float64)[None], walls)[0])
 
 
 def _wall_distances(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
-    """:func:`_wall_distance` of each of ``points (P, 2)`` at once, ``(P,)``: the same
-    arithmetic element for element, so the same bits (tested), in one pass over the walls."""
+    """The distance from each of ``points (P, 2)`` to the nearest wall segment, ``(P,)``, in one
+    pass over the walls (∞ without walls)."""
     if walls.shape[0] == 0:
         return np.full(points.shape[0], math.inf)
     a = walls[:, :2]
