@@ -15,6 +15,7 @@ import torch
 from safetensors.torch import load_file
 
 from pioneer.control.teacher import make_teacher
+from pioneer.learn import finetune_trainer as trainer_module
 from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, finetune_student
 from pioneer.learn.finetune_trainer import CURVE_COLUMNS, FinetuneTrainer
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
@@ -25,6 +26,7 @@ from pioneer.learn.models import (
     read_checkpoint_meta,
     save_student,
 )
+from pioneer.nn.critic import lower_tail_mean
 from pioneer.nn.ppo import lagrangian_advantage
 from pioneer.reward.crowdnav import crowdnav_reward_terms
 from pioneer.sim.events import Event
@@ -148,6 +150,39 @@ def test_the_lagrangian_advantage_weighs_the_cost_by_lambda() -> None:
     np.testing.assert_allclose(lagrangian_advantage(adv, cost, 3.0), [0.25, -1.25, -1.375])
 
 
+def test_risk_sensitive_advantages_bootstrap_from_the_cvar_of_the_quantiles(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cfg = dataclasses.replace(TINY, risk_alpha=0.25, quantiles=8)
+    tr = FinetuneTrainer(load_student(_student(tmp_path)), [["hr-rl"]], cfg)
+    assert tr.risky and tr.critic.n_out == 8
+    calls: list[tuple[np.ndarray, np.ndarray]] = []
+    gae = trainer_module.compute_gae
+
+    def spy(rewards: Any, values: Any, dones: Any, last: Any, *gl: float) -> Any:
+        calls.append((values.copy(), last.copy()))
+        return gae(rewards, values, dones, last, *gl)
+
+    monkeypatch.setattr(trainer_module, "compute_gae", spy)
+    batch = tr.rollout()
+    seen = tr._critic_in(batch["x"], batch["priv"])
+    last = tr._critic_in(
+        torch.from_numpy(tr.envs.student_inputs()), torch.from_numpy(tr.envs.privileged())
+    )
+    with torch.no_grad():
+        q, q_last = tr.critic(seen), tr.critic(last)
+    shape = (cfg.rollout, cfg.envs)
+    (v_mean, l_mean), (v_risk, l_risk) = calls  # the targets' GAE, then the advantages'
+    np.testing.assert_allclose(v_mean, q.mean(-1).reshape(shape).numpy(), rtol=1e-6)
+    np.testing.assert_allclose(l_mean, q_last.mean(-1).numpy(), rtol=1e-6)
+    want = lower_tail_mean(q, 0.25).reshape(shape).numpy()
+    np.testing.assert_allclose(v_risk, want, rtol=1e-6)
+    np.testing.assert_allclose(l_risk, lower_tail_mean(q_last, 0.25).numpy(), rtol=1e-6)
+    assert (v_risk <= v_mean + 1e-6).all()  # the worst quarter lies below the mean
+    stats = tr.learn(batch)  # the critic regresses with the quantile loss
+    assert math.isfinite(stats["value_loss"])
+
+
 def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) -> None:
     start = load_student(_student(tmp_path))
     cfg = dataclasses.replace(TINY, collision_limit=0.1, lagrange_lr=0.5)
@@ -172,8 +207,9 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         {"collision_limit": 0.0},  # PPO-Lagrangian: its cost critic and λ are saved too
         {"replay": 0.5, "replay_mode": "plr"},  # level replay: the layouts seen are saved
         {"teacher_coef": 1.0, "teacher_alpha": 2.0},  # teacher guidance
+        {"risk_alpha": 0.25, "quantiles": 8},  # risk-sensitive: a distributional critic
     ],
-    ids=["prioritised", "constrained", "level-replay", "teacher-guided"],
+    ids=["prioritised", "constrained", "level-replay", "teacher-guided", "risk-sensitive"],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
     src = _student(tmp_path)

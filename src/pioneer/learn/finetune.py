@@ -36,6 +36,16 @@ Collision constraint (optional; ``collision_limit`` < 1)
     λ ← max(0, λ + ``lagrange_lr`` · (c − ``collision_limit``)), c the collision rate of the
     last ``window`` training episodes (under the exploration noise). The reward alone trades
     a collision (−20) against time; the constraint states the risk allowed instead.
+Risk-sensitive advantages (optional; ``risk_alpha`` < 1)
+    The expected return lets a rare collision be outweighed by the many episodes in which the
+    same move arrived sooner. Here the critic learns ``quantiles`` quantiles of the return
+    instead (quantile regression towards the λ-returns, QR-DQN's quantile Huber loss,
+    :mod:`pioneer.nn.critic`), and the policy's advantages are GAE over
+    V_α(s) = CVaR_α, the mean of the worst α share of the returns the critic predicts from s:
+    δ_t = r_t + γ V_α(s_{t+1}) − V_α(s_t). A move into states with a bad tail (a person who
+    may walk out any moment) loses advantage even when it usually pays — the risk-averse
+    reading of the return in the spirit of Tang et al. 2019, "Worst Cases Policy Gradients"
+    (arXiv 1911.03618). The critic's own targets stay the λ-returns bootstrapped with its mean.
 Teacher guidance (optional; ``teacher_coef`` > 0)
     The privileged teacher labels one copy in each of the first ``teacher_groups`` groups every
     step (:meth:`~pioneer.learn.layout_env.LayoutEnvs.teacher_labels`: DAgger's label, on the

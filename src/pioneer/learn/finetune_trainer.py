@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 import numpy as np
 import torch
-from annotated_types import MinLen
+from annotated_types import Interval, MinLen
 from numpy.typing import NDArray
 from torch import nn
 
@@ -24,7 +24,7 @@ from pioneer.errors import ConfigError, expect
 from pioneer.learn.layout_env import LayoutEnvs, ReplayMode, privileged_width
 from pioneer.learn.models import Student
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
-from pioneer.nn.layers import seeded_linear
+from pioneer.nn.critic import Critic, lower_tail_mean, quantile_huber
 from pioneer.nn.ppo import (
     clipped_surrogate,
     compute_gae,
@@ -36,7 +36,7 @@ from pioneer.nn.ppo import (
 from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer.sim.events import Event
 
-__all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "Critic", "FinetuneConfig", "FinetuneTrainer"]
+__all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "FinetuneConfig", "FinetuneTrainer"]
 
 TRAIN_FORMAT = "pioneer.finetune-train/1"
 CURVE_COLUMNS = (
@@ -98,6 +98,11 @@ class FinetuneConfig(Config):
     teacher_coef: NonNegative = 0.0
     teacher_groups: Count = 4
     teacher_alpha: NonNegative = 0.0
+    # risk-sensitive advantages: below 1, the critic learns ``quantiles`` quantiles of the
+    # return and the policy's advantages bootstrap from their lower-tail mean CVaR_α (the
+    # mean of the worst α share of returns); 1: the expected return
+    risk_alpha: Annotated[float, Interval(gt=0.0, le=1.0)] = 1.0
+    quantiles: Annotated[int, Interval(ge=2)] = 32  # N of the critic's quantiles (α < 1)
     reward: CrowdNavRewardConfig = FINETUNE_REWARD
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
     checkpoint_every: Count = 20  # [updates] between checkpoints
@@ -125,24 +130,6 @@ def _half_square(mean: torch.Tensor, target: torch.Tensor, scale: torch.Tensor) 
     return 0.5 * (((mean - target) / scale) ** 2).sum(-1)
 
 
-class Critic(nn.Module):
-    """V(x, s): an MLP of the student's standardised inputs and the privileged features."""
-
-    def __init__(self, n_in: int, hidden: Sequence[int], gen: torch.Generator) -> None:
-        super().__init__()
-        layers: list[nn.Module] = []
-        for width in hidden:
-            layers += [seeded_linear(n_in, width, gen), nn.ReLU()]
-            n_in = width
-        layers.append(seeded_linear(n_in, 1, gen))
-        self.net = nn.Sequential(*layers)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Values ``(N,)``."""
-        out: torch.Tensor = self.net(x).squeeze(-1)
-        return out
-
-
 class FinetuneTrainer:
     """Everything that changes during fine-tuning (saved whole in the checkpoint)."""
 
@@ -153,7 +140,8 @@ class FinetuneTrainer:
         self.ref = copy.deepcopy(start).eval().requires_grad_(False)
         gen = torch.Generator().manual_seed(cfg.seed)
         n_in = start.config.input_dim + privileged_width(MAX_HUMANS)
-        self.critic = Critic(n_in, cfg.critic_hidden, gen)
+        n_out = cfg.quantiles if self.risky else 1
+        self.critic = Critic(n_in, cfg.critic_hidden, gen, n_out)
         self.log_std = nn.Parameter(torch.full((2,), math.log(cfg.init_std)))
         actor_params = [*self.actor.parameters(), self.log_std]
         self.opt = torch.optim.Adam(actor_params, lr=cfg.lr, eps=1e-5)
@@ -201,6 +189,21 @@ class FinetuneTrainer:
         return np.arange(min(cfg.teacher_groups, cfg.groups), dtype=np.int64) * cfg.group_size
 
     @property
+    def risky(self) -> bool:
+        """Whether the advantages are risk-sensitive (a distributional critic, CVaR_α)."""
+        return self.cfg.risk_alpha < 1.0
+
+    def _values(self, seen: torch.Tensor) -> tuple[F64, F64]:
+        """The critic's expected return (the targets' bootstrap) and the value the advantages
+        use: the same, or CVaR_α of its quantiles when risk-sensitive."""
+        v = self.critic(seen)
+        if not self.risky:
+            out = v.numpy().astype(np.float64)
+            return out, out
+        mean = v.mean(-1).numpy().astype(np.float64)
+        return mean, lower_tail_mean(v, self.cfg.risk_alpha).numpy().astype(np.float64)
+
+    @property
     def constrained(self) -> bool:
         """Whether the collision constraint (PPO-Lagrangian) is on."""
         return self.cfg.collision_limit < 1.0
@@ -229,6 +232,7 @@ class FinetuneTrainer:
         t_len, b = cfg.rollout, cfg.envs
         xs, privs, actions, logps = [], [], [], []
         values, rewards, dones = np.zeros((t_len, b)), np.zeros((t_len, b)), np.zeros((t_len, b))
+        risk_values = np.zeros((t_len, b))
         cost_values, costs = np.zeros((t_len, b)), np.zeros((t_len, b))
         taught = self._taught() if self.guided else np.zeros(0, dtype=np.int64)
         labels = np.zeros((t_len, b, 2))
@@ -240,7 +244,7 @@ class FinetuneTrainer:
                 mean = self.actor.deterministic_action(x, "mode")
                 action = mean + std * torch.randn(mean.shape, generator=self.gen)
                 seen = self._critic_in(x, priv)
-                values[t] = self.critic(seen).numpy()
+                values[t], risk_values[t] = self._values(seen)
                 if self.cost_critic is not None:
                     cost_values[t] = self.cost_critic(seen).numpy()
                 if taught.size:
@@ -261,7 +265,7 @@ class FinetuneTrainer:
             x = torch.from_numpy(envs.student_inputs())
             priv = torch.from_numpy(envs.privileged())
             seen = self._critic_in(x, priv)
-            last_value = self.critic(seen).numpy().astype(np.float64)
+            last_value, last_risk = self._values(seen)
             last_cost = np.zeros(b)
             if self.cost_critic is not None:
                 last_cost = self.cost_critic(seen).numpy().astype(np.float64)
@@ -269,6 +273,9 @@ class FinetuneTrainer:
             ref = self.ref.deterministic_action(x_all, "mode")
         self.env_steps += t_len * b
         adv, ret = compute_gae(rewards, values, dones, last_value, cfg.gamma, cfg.gae_lambda)
+        if self.risky:
+            gl = cfg.gamma, cfg.gae_lambda
+            adv = compute_gae(rewards, risk_values, dones, last_risk, *gl)[0]
         batch = {
             "x": x_all,
             "priv": torch.cat(privs),
@@ -373,9 +380,13 @@ class FinetuneTrainer:
     def _regress(
         self, critic: Critic, opt: torch.optim.Optimizer, seen: torch.Tensor, target: torch.Tensor
     ) -> float:
-        """One step of ``critic`` towards ``target`` (½ mean squared error, the gradient's norm
-        clipped); the loss."""
-        loss = 0.5 * ((target - critic(seen)) ** 2).mean()
+        """One step of ``critic`` towards ``target`` (½ mean squared error, or the quantile
+        Huber loss of a distributional critic; the gradient's norm clipped); the loss."""
+        pred = critic(seen)
+        if pred.dim() == 2:
+            loss = quantile_huber(pred, target)
+        else:
+            loss = 0.5 * ((target - pred) ** 2).mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(critic.parameters(), self.cfg.max_grad_norm)
