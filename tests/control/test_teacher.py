@@ -680,6 +680,43 @@ def test_a_patient_teacher_that_keeps_its_margins_drops_only_the_learned_term():
     )
 
 
+def test_a_stuck_teacher_gives_up_the_margin_to_people_but_not_the_walls():
+    # oracle: stuck (no progress for `after` seconds), the teacher decides as the teacher
+    # without R_den and without the human margin; within its hold after progress, as one that
+    # keeps both margins
+    world, state = _driven(6, 20, [0.2, 0.0])
+    t_now = float(state.t[0])
+    stuck = make_teacher(
+        "hr-rl",
+        patience=0.5,
+        patience_hold=100.0,
+        patience_keep_margins=True,
+        patience_stuck_drops_human_margin=True,
+    )
+    stuck._progress = (0.0, t_now - 1.0)  # no progress for 1 s
+    walls_only = make_teacher("hr-rl", density=False, human_margin=0.0, patience=0)
+    got, want = stuck.decide(world, state), walls_only.decide(world, state)
+    assert stuck._stuck
+    np.testing.assert_array_equal(got.scores, want.scores)
+    np.testing.assert_array_equal(got.command, want.command)
+    held = make_teacher(
+        "hr-rl",
+        patience=0.5,
+        patience_hold=100.0,
+        patience_keep_margins=True,
+        patience_stuck_drops_human_margin=True,
+    )
+    held._progress = (0.0, t_now)  # progress just made, impatient from earlier: both margins
+    held._impatient_until = t_now + 50.0
+    rules = make_teacher("hr-rl", density=False, patience=0)
+    assert held.impatient(state) and not held._stuck
+    np.testing.assert_array_equal(
+        held.decide(world, state).scores, rules.decide(world, state).scores
+    )
+    # the two differ here: the human margin excludes candidates the walls alone allow
+    assert not np.array_equal(got.scores, rules.decide(world, state).scores)
+
+
 def test_teacher_patient_is_our_teacher_with_the_chosen_patience():
     from pioneer.control.registry import build_policy
     from pioneer.control.teacher import PATIENT

@@ -55,6 +55,7 @@ config_flags(
     progress="patience_progress",
     hold="patience_hold",
     keep_margins="patience_keep_margins",
+    stuck_drops_human_margin="patience_stuck_drops_human_margin",
 )
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")

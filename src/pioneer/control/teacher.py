@@ -157,6 +157,10 @@ class Patience(Config):
     progress: Positive = 0.05  # [m] a shorter distance to the goal by this much is progress
     hold: NonNegative = 0.0  # [s] once impatient, it stays so this long whatever its progress
     keep_margins: bool = False  # impatient, it still prefers the candidates that keep the margins
+    # with ``keep_margins``: while it has made no progress for ``after`` seconds (not merely
+    # within its hold), it gives up the margin to people — never the wall's: hugging a wall
+    # traps a robot that only drives forward — until it makes progress again
+    stuck_drops_human_margin: bool = False
 
     @property
     def active(self) -> bool:
@@ -251,6 +255,7 @@ class LookaheadTeacher:
         self._assumed: dict[str, Any] = {}  # the world with the assumed reaction (Assumptions)
         self._progress = (math.inf, 0.0)  # (best distance to the goal [m], when it was made [s])
         self._impatient_until = -math.inf  # [s] (Patience.hold)
+        self._stuck = False  # no progress for Patience.after seconds, as of the last decision
 
     def reset(self, info: Mapping[str, Any], rng: np.random.Generator) -> None:
         """Forget the previous command and the progress made."""
@@ -258,6 +263,7 @@ class LookaheadTeacher:
         self.last = None
         self._progress = (math.inf, 0.0)
         self._impatient_until = -math.inf
+        self._stuck = False
 
     def impatient(self, state: State) -> bool:
         """Note the progress to ``state`` (B = 1) and say whether the teacher has made none for
@@ -271,9 +277,10 @@ class LookaheadTeacher:
             self._impatient_until = -math.inf
         if d < best - p.progress or t < since:
             self._progress = best, since = d, t
+        self._stuck = p.active and t - since >= p.after - 1e-9
         if not p.active:
             return False
-        if t - since >= p.after - 1e-9:
+        if self._stuck:
             self._impatient_until = max(self._impatient_until, t + p.hold)
             return True
         return t < self._impatient_until - 1e-9
@@ -366,8 +373,10 @@ class LookaheadTeacher:
         r_goal = goal_term(d_goal, d_total)
         feasible = ~ro.collided & (ro.min_gap >= cfg.safety_margin)
         n_feasible = int(feasible.sum())
-        drop_margins = impatient and not cfg.patience.keep_margins
-        chosen = feasible if drop_margins else self._preferred(feasible, ro)
+        p = cfg.patience
+        drop_margins = impatient and not p.keep_margins
+        people = not (impatient and p.stuck_drops_human_margin and self._stuck)
+        chosen = feasible if drop_margins else self._preferred(feasible, ro, people)
         # Only candidates that can be chosen are observed and scored by the density: about half
         # collide in the paper world, and the rays and the density are most of a decision's
         # arithmetic. (The others keep 0 for both terms; they score −∞.)
@@ -388,13 +397,17 @@ class LookaheadTeacher:
             ro.collision_step,
         )  # fmt: skip
 
-    def _preferred(self, feasible: NDArray[np.bool_], ro: Rollout) -> NDArray[np.bool_]:
+    def _preferred(
+        self, feasible: NDArray[np.bool_], ro: Rollout, people: bool = True
+    ) -> NDArray[np.bool_]:
         """The candidates the teacher chooses among: those that keep the soft margins, else
         those that keep the largest fraction of them some candidate keeps
-        (:meth:`SoftMargins.factors`), else all feasible ones."""
+        (:meth:`SoftMargins.factors`), else all feasible ones; without ``people``, the wall's
+        margin alone."""
         m = self.config.margins
+        human = m.human if people else 0.0
         for f in m.factors():
-            keep = feasible & (ro.min_gap >= f * m.human) & (ro.min_wall_gap >= f * m.wall)
+            keep = feasible & (ro.min_gap >= f * human) & (ro.min_wall_gap >= f * m.wall)
             if keep.any():
                 return keep
         return feasible
@@ -433,6 +446,7 @@ def make_teacher(
     patience_progress: float = Patience.progress,
     patience_hold: float = Patience.hold,
     patience_keep_margins: bool = Patience.keep_margins,
+    patience_stuck_drops_human_margin: bool = Patience.stuck_drops_human_margin,
     patient: bool = False,
     name: str = "teacher",
 ) -> LookaheadTeacher:
@@ -444,9 +458,10 @@ def make_teacher(
     [m], ``assume_a_robot`` [m/s²] and ``assume_start_now`` what its predictions assume of
     every person (:class:`Assumptions`; beyond the paper); ``patience`` [s] how long it holds
     to its margins and learned term without progress (:class:`Patience`; 0: always, as the
-    paper's teacher), ``patience_progress`` [m], ``patience_hold`` [s] and
-    ``patience_keep_margins`` the rest of :class:`Patience`; ``patient``: :data:`PATIENT`
-    instead of those four (the policy ``teacher-patient``)."""
+    paper's teacher), ``patience_progress`` [m], ``patience_hold`` [s],
+    ``patience_keep_margins`` and ``patience_stuck_drops_human_margin`` the rest of
+    :class:`Patience`; ``patient``: :data:`PATIENT` instead of those five (the policy
+    ``teacher-patient``)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -472,6 +487,7 @@ def make_teacher(
             progress=patience_progress,
             hold=patience_hold,
             keep_margins=patience_keep_margins,
+            stuck_drops_human_margin=patience_stuck_drops_human_margin,
         ),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)
