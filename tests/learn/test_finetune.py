@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import load_file
+from safetensors import safe_open
+from safetensors.torch import load_file, save_file
 
 from pioneer.control.teacher import make_teacher
 from pioneer.learn import finetune_trainer as trainer_module
@@ -233,6 +234,26 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[
         finetune_student(
             src, ["h?-r?"], tmp_path / "b", dataclasses.replace(cfg, lr=1e-3), progress=False
         )
+
+
+def test_a_checkpoint_written_before_newer_settings_resumes_with_them_at_their_defaults(
+    tmp_path: Path,
+) -> None:
+    src = _student(tmp_path)
+    half = dataclasses.replace(TINY, total_steps=TINY.total_steps // 2)
+    finetune_student(src, ["hr-rl"], tmp_path / "b", half, progress=False)
+    ckpt = tmp_path / "b" / "checkpoint.safetensors"
+    with safe_open(str(ckpt), "pt") as f:
+        meta, tensors = f.metadata(), {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118
+    settings = json.loads(meta["settings"])
+    for k in ("risk_alpha", "quantiles", "teacher_coef"):  # as an older version wrote it
+        del settings["finetune"][k]
+    save_file(tensors, str(ckpt), {**meta, "settings": json.dumps(settings)})
+    resumed = finetune_student(src, ["hr-rl"], tmp_path / "b", TINY, progress=False)
+    assert resumed["resumed_from_update"] == 2
+    with pytest.raises(Exception, match="settings"):  # a new setting away from its default
+        risky = dataclasses.replace(TINY, total_steps=8 * TINY.steps_per_update, risk_alpha=0.5)
+        finetune_student(src, ["hr-rl"], tmp_path / "b", risky, progress=False)
 
 
 def test_the_teacher_labels_are_its_decisions_in_those_copies(tmp_path: Path) -> None:

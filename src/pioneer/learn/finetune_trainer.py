@@ -24,10 +24,11 @@ from pioneer.errors import ConfigError, expect
 from pioneer.learn.layout_env import LayoutEnvs, ReplayMode, privileged_width
 from pioneer.learn.models import Student
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
-from pioneer.nn.critic import Critic, lower_tail_mean, quantile_huber
+from pioneer.nn.critic import Critic, lower_tail_mean, value_loss
 from pioneer.nn.ppo import (
     clipped_surrogate,
     compute_gae,
+    gaussian_kl,
     lagrangian_advantage,
     progress_state,
     restore_progress,
@@ -52,6 +53,7 @@ CURVE_COLUMNS = (
     "lagrange",
     "wall_time_s",
 )
+_NOT_SETTINGS = ("total_steps", "checkpoint_every")  # may change between a run and its resume
 FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
 MAX_HUMANS = 6  # person slots of the critic's privileged view
 F64 = NDArray[np.float64]
@@ -124,10 +126,13 @@ class FinetuneConfig(Config):
         return -(-self.total_steps // self.steps_per_update)
 
 
-def _half_square(mean: torch.Tensor, target: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-    """½ ‖(mean − target) / scale‖² per row ``(N,)``: the KL divergence between two Gaussians
-    of standard deviation ``scale`` (the pull's and the teacher guidance's loss)."""
-    return 0.5 * (((mean - target) / scale) ** 2).sum(-1)
+def _with_new_defaults(stored: dict[str, Any]) -> dict[str, Any]:
+    """A checkpoint's settings with the fine-tuning settings added since it was written at
+    their defaults: each new setting's default is the run as it was before it existed."""
+    defaults = {k: v for k, v in FinetuneConfig().to_dict().items() if k not in _NOT_SETTINGS}
+    if isinstance(stored.get("finetune"), dict):
+        stored["finetune"] = {**json.loads(json.dumps(defaults)), **stored["finetune"]}
+    return stored
 
 
 class FinetuneTrainer:
@@ -349,7 +354,7 @@ class FinetuneTrainer:
                 mean = self.actor.deterministic_action(x, "mode")
                 logp = self._logp(mean, batch["action"][idx])
                 pg = clipped_surrogate(logp, batch["logp"][idx], adv[idx], cfg.clip)
-                pull = _half_square(mean, batch["ref"][idx], scale).mean()
+                pull = gaussian_kl(mean, batch["ref"][idx], scale).mean()
                 loss = pg + beta * pull
                 if "taught" in batch:
                     imitation = self._imitation(mean, batch, idx, scale)
@@ -374,7 +379,7 @@ class FinetuneTrainer:
         m = batch["taught"][idx]
         if not bool(m.any()):
             return mean.sum() * 0.0
-        err = _half_square(mean[m], batch["label"][idx][m], scale)
+        err = gaussian_kl(mean[m], batch["label"][idx][m], scale)
         return (batch["label_w"][idx][m] * err).mean()
 
     def _regress(
@@ -382,11 +387,7 @@ class FinetuneTrainer:
     ) -> float:
         """One step of ``critic`` towards ``target`` (½ mean squared error, or the quantile
         Huber loss of a distributional critic; the gradient's norm clipped); the loss."""
-        pred = critic(seen)
-        if pred.dim() == 2:
-            loss = quantile_huber(pred, target)
-        else:
-            loss = 0.5 * ((target - pred) ** 2).mean()
+        loss = value_loss(critic(seen), target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(critic.parameters(), self.cfg.max_grad_norm)
@@ -427,9 +428,7 @@ class FinetuneTrainer:
     # -------------------------------------------------------------------- checkpoint
     def settings(self, student_sha256: str) -> dict[str, Any]:
         """What must match between a checkpoint and a resuming command."""
-        cfg = self.cfg.to_dict()
-        for k in ("total_steps", "checkpoint_every"):
-            cfg.pop(k)
+        cfg = {k: v for k, v in self.cfg.to_dict().items() if k not in _NOT_SETTINGS}
         return {"finetune": cfg, "student_sha256": student_sha256, "scenarios": self.names}
 
     def save(self, path: Path, settings: dict[str, Any]) -> None:
@@ -465,7 +464,7 @@ class FinetuneTrainer:
         """Restore the state :meth:`save` wrote (its settings must be ``settings``)."""
         fix = "point --out at a new folder (the checkpoint is corrupt or of another kind)"
         meta, t = read_training_state(path, TRAIN_FORMAT, fix)
-        stored = json.loads(meta["settings"])
+        stored = _with_new_defaults(json.loads(meta["settings"]))
         if stored != json.loads(json.dumps(settings)):
             diff = sorted(k for k in set(stored) | set(settings) if stored.get(k) != settings[k])
             raise ConfigError(

@@ -12,7 +12,7 @@ from torch import nn
 
 from pioneer.nn.layers import seeded_linear
 
-__all__ = ["Critic", "lower_tail_mean", "quantile_huber", "quantile_levels"]
+__all__ = ["Critic", "lower_tail_mean", "quantile_huber", "quantile_levels", "value_loss"]
 
 
 class Critic(nn.Module):
@@ -71,3 +71,11 @@ def lower_tail_mean(quantiles: torch.Tensor, alpha: float) -> torch.Tensor:
     if full < n:
         w[full] = mass - full
     return (q * w).sum(-1) / mass
+
+
+def value_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """A :class:`Critic`'s regression loss towards one sampled return per row: ½ the mean
+    squared error of values ``(B,)``, the quantile Huber loss of quantiles ``(B, N)``."""
+    if pred.dim() == 2:
+        return quantile_huber(pred, target)
+    return 0.5 * ((target - pred) ** 2).mean()

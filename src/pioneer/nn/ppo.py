@@ -30,6 +30,7 @@ __all__ = [
     "compute_gae",
     "curve_columns",
     "curve_csv",
+    "gaussian_kl",
     "lagrangian_advantage",
     "update_loop",
     "window_row",
@@ -66,6 +67,13 @@ def clipped_surrogate(
     """PPO's policy loss −E[min(ρ A, clip(ρ, 1 − ε, 1 + ε) A)], ρ = π/π_old (scalar)."""
     ratio = torch.exp(logp - old_logp)
     return -torch.min(ratio * adv, ratio.clamp(1 - clip, 1 + clip) * adv).mean()
+
+
+def gaussian_kl(mean: torch.Tensor, target: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    """½ ‖(mean − target) / scale‖² per row ``(N,)``: the KL divergence between two Gaussians
+    of the same diagonal standard deviation ``scale`` (the fine-tuning's pull towards its
+    starting policy and its teacher guidance)."""
+    return 0.5 * (((mean - target) / scale) ** 2).sum(-1)
 
 
 def lagrangian_advantage(adv: F64, cost_adv: F64, lagrange: float) -> F64:
