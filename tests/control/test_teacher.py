@@ -686,26 +686,20 @@ def test_a_stuck_teacher_gives_up_the_margin_to_people_but_not_the_walls():
     # keeps both margins
     world, state = _driven(6, 20, [0.2, 0.0])
     t_now = float(state.t[0])
-    stuck = make_teacher(
-        "hr-rl",
-        patience=0.5,
-        patience_hold=100.0,
-        patience_keep_margins=True,
-        patience_stuck_drops_human_margin=True,
-    )
+    kw = {
+        "patience": 0.5,
+        "patience_hold": 100.0,
+        "patience_keep_margins": True,
+        "patience_stuck_drops_human_margin": True,
+    }
+    stuck = make_teacher("hr-rl", **kw)
     stuck._progress = (0.0, t_now - 1.0)  # no progress for 1 s
     walls_only = make_teacher("hr-rl", density=False, human_margin=0.0, patience=0)
     got, want = stuck.decide(world, state), walls_only.decide(world, state)
     assert stuck._stuck
     np.testing.assert_array_equal(got.scores, want.scores)
     np.testing.assert_array_equal(got.command, want.command)
-    held = make_teacher(
-        "hr-rl",
-        patience=0.5,
-        patience_hold=100.0,
-        patience_keep_margins=True,
-        patience_stuck_drops_human_margin=True,
-    )
+    held = make_teacher("hr-rl", **kw)
     held._progress = (0.0, t_now)  # progress just made, impatient from earlier: both margins
     held._impatient_until = t_now + 50.0
     rules = make_teacher("hr-rl", density=False, patience=0)

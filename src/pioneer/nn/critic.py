@@ -39,7 +39,7 @@ class Critic(nn.Module):
 
 def quantile_levels(n: int) -> torch.Tensor:
     """The quantile midpoints τ̂_i = (2i − 1) / (2N), i = 1 … N (QR-DQN, Lemma 2)."""
-    return (torch.arange(n, dtype=torch.float64) + 0.5).div(n).to(torch.float32)
+    return (torch.arange(n, dtype=torch.float32) + 0.5) / n
 
 
 def quantile_huber(pred: torch.Tensor, target: torch.Tensor, kappa: float = 1.0) -> torch.Tensor:
