@@ -209,8 +209,17 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         {"replay": 0.5, "replay_mode": "plr"},  # level replay: the layouts seen are saved
         {"teacher_coef": 1.0, "teacher_alpha": 2.0},  # teacher guidance
         {"risk_alpha": 0.25, "quantiles": 8},  # risk-sensitive: a distributional critic
+        # a curriculum of layouts practised to mastery: its active set and history are saved
+        {"replay": 0.5, "replay_mode": "mastery", "mastery_layouts": 1, "mastery_window": 2},
     ],
-    ids=["prioritised", "constrained", "level-replay", "teacher-guided", "risk-sensitive"],
+    ids=[
+        "prioritised",
+        "constrained",
+        "level-replay",
+        "teacher-guided",
+        "risk-sensitive",
+        "mastery",
+    ],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
     src = _student(tmp_path)
@@ -220,6 +229,8 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[
     finetune_student(src, ["h?-r?"], tmp_path / "b", half, progress=False)
     resumed = finetune_student(src, ["h?-r?"], tmp_path / "b", cfg, progress=False)
     assert resumed["resumed_from_update"] == 2 and resumed["updates"] == whole["updates"] == 4
+    assert resumed.get("curriculum") == whole.get("curriculum")  # "mastery": its set, saved
+    assert ("curriculum" in whole) == (change.get("replay_mode") == "mastery")
     a = load_file(tmp_path / "a" / "student.safetensors")
     b = load_file(tmp_path / "b" / "student.safetensors")
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

@@ -64,6 +64,12 @@ PPO
     with σ) and the critic (``critic_lr``). The environments are
     :class:`~pioneer.learn.layout_env.LayoutEnvs`: ``groups`` layouts × ``group_size`` copies;
     every ``layout_period`` updates every group draws a new layout.
+Layouts practised to mastery (optional; ``replay_mode = "mastery"``)
+    A share ``replay`` of the draws practises a small set of hard layouts, each kept until the
+    student masters it (``mastery`` of its last ``mastery_window`` episodes succeed) and then
+    replaced by another it fails (:mod:`pioneer.learn.curriculum`): depth of practice on the
+    cases it fails, where prioritised layouts meet them often but each only for
+    ``layout_period`` updates at a time. ``train.json`` lists the layouts mastered and dropped.
 
 Outputs in ``out/`` (each written atomically)::
 
@@ -209,6 +215,7 @@ def finetune_student(
                 "wall_time_s": round(tr.wall, 1),
                 "resumed_from_update": resumed_from,
                 "final": dict(zip(CURVE_COLUMNS[3:7], last[3:7], strict=True)),
+                **_curriculum_report(tr),
             }
 
         t_start, s_start = time.perf_counter(), tr.env_steps
@@ -234,6 +241,14 @@ def finetune_student(
             exc.kept = f"update {tr.update} of {cfg.updates} kept in {ckpt}"
             raise
         return summary
+
+
+def _curriculum_report(tr: FinetuneTrainer) -> dict[str, Any]:
+    """The curriculum's layouts now in practice and those that left (``"mastery"`` only)."""
+    cur = tr.envs.curriculum
+    if cur is None:
+        return {}
+    return {"curriculum": {"active": list(cur.active), "left": list(cur.history)}}
 
 
 def _obs_dim(name: str) -> int:

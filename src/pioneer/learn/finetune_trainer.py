@@ -5,23 +5,21 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
 import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
 import torch
-from annotated_types import Interval, MinLen
 from numpy.typing import NDArray
 from torch import nn
 
-from pioneer.bounds import Count, NonNegative, NonNegativeInt, Positive, UnitInterval
-from pioneer.config import Config
 from pioneer.errors import ConfigError, expect
-from pioneer.learn.layout_env import LayoutEnvs, ReplayMode, privileged_width
+from pioneer.learn.curriculum import Curriculum
+from pioneer.learn.finetune_config import FINETUNE_REWARD, FinetuneConfig
+from pioneer.learn.layout_env import LayoutEnvs, privileged_width
 from pioneer.learn.models import Student
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
 from pioneer.nn.critic import Critic, lower_tail_mean, value_loss
@@ -34,7 +32,6 @@ from pioneer.nn.ppo import (
     restore_progress,
     window_row,
 )
-from pioneer.reward.crowdnav import NO_INTRUSION, CrowdNavRewardConfig
 from pioneer.sim.events import Event
 
 __all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "FinetuneConfig", "FinetuneTrainer"]
@@ -54,76 +51,8 @@ CURVE_COLUMNS = (
     "wall_time_s",
 )
 _NOT_SETTINGS = ("total_steps", "checkpoint_every")  # may change between a run and its resume
-FINETUNE_REWARD = NO_INTRUSION  # the CrowdNav++ reward without its intrusion term
 MAX_HUMANS = 6  # person slots of the critic's privileged view
 F64 = NDArray[np.float64]
-
-
-@dataclasses.dataclass(frozen=True)
-class FinetuneConfig(Config):
-    """Settings of a fine-tuning run (module docstring)."""
-
-    total_steps: Count = 6_000_000  # env steps (all copies together)
-    groups: Count = 8  # layouts stepped at once
-    group_size: Count = 8  # copies of each layout
-    rollout: Count = 64  # steps per copy per update
-    layout_period: Count = 4  # [updates] between two draws of every group's layout
-    lr: Positive = 3e-5  # the actor's Adam learning rate (with σ)
-    critic_lr: Positive = 1e-3  # the critic's
-    gamma: UnitInterval = 0.99  # discount per 0.1 s step
-    gae_lambda: UnitInterval = 0.95  # GAE λ
-    clip: Positive = 0.2  # PPO ratio clip
-    epochs: Count = 4  # passes over each rollout
-    minibatches: Count = 4  # per pass
-    max_grad_norm: Positive = 0.5  # gradient clipping (global L2 norm, per network)
-    init_std: Positive = 0.2  # σ_0: exploration noise in standardised action units
-    kl_coef: NonNegative = 1.0  # β_0 of the pull towards the DAgger student
-    kl_fade: NonNegativeInt = 500_000  # [env steps] over which β falls to 0
-    critic_warmup: NonNegativeInt = 10  # [updates] the critic alone learns first
-    # share of the layout draws made in proportion to each layout's running failure rate
-    # (prioritised layouts; 0: uniform)
-    replay: UnitInterval = 0.0
-    # "mix": the replayed share weighs every layout by its failure rate, one not yet seen
-    # counting as failing; "plr": the replayed share picks among the layouts already seen,
-    # the rest among those not yet seen (prioritised level replay)
-    replay_mode: ReplayMode = "mix"
-    critic_hidden: Annotated[tuple[Count, ...], MinLen(1)] = (128, 128)  # its widths
-    # the share of training episodes allowed to end in a collision: below 1, PPO-Lagrangian
-    # (a cost critic, advantages (A_r − λ A_c) / (1 + λ), λ raised while the running
-    # collision rate exceeds it); 1: the plain reward, unconstrained
-    collision_limit: UnitInterval = 1.0
-    lagrange_lr: Positive = 0.5  # λ's step per update per unit of excess collision rate
-    # teacher guidance: β_T of the imitation of the privileged teacher's label in the copies it
-    # labels (0: off); one copy in each of the first ``teacher_groups`` groups is labelled
-    # every step; ``teacher_alpha`` α of the per-state weight exp(−α d²), d the distance
-    # between the DAgger student's command and the label in standardised units (0: weight 1)
-    teacher_coef: NonNegative = 0.0
-    teacher_groups: Count = 4
-    teacher_alpha: NonNegative = 0.0
-    # risk-sensitive advantages: below 1, the critic learns ``quantiles`` quantiles of the
-    # return and the policy's advantages bootstrap from their lower-tail mean CVaR_α (the
-    # mean of the worst α share of returns); 1: the expected return
-    risk_alpha: Annotated[float, Interval(gt=0.0, le=1.0)] = 1.0
-    quantiles: Annotated[int, Interval(ge=2)] = 32  # N of the critic's quantiles (α < 1)
-    reward: CrowdNavRewardConfig = FINETUNE_REWARD
-    seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
-    checkpoint_every: Count = 20  # [updates] between checkpoints
-    window: Count = 200  # finished episodes in the curve's running statistics
-
-    @property
-    def envs(self) -> int:
-        """Copies stepped together: groups × group_size."""
-        return self.groups * self.group_size
-
-    @property
-    def steps_per_update(self) -> int:
-        """Env steps per update."""
-        return self.envs * self.rollout
-
-    @property
-    def updates(self) -> int:
-        """Updates for ``total_steps`` (rounded up)."""
-        return -(-self.total_steps // self.steps_per_update)
 
 
 def _with_new_defaults(stored: dict[str, Any]) -> dict[str, Any]:
@@ -175,6 +104,7 @@ class FinetuneTrainer:
             MAX_HUMANS,
             cfg.replay,
             cfg.replay_mode,
+            self._curriculum(),
         )
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0
@@ -182,6 +112,15 @@ class FinetuneTrainer:
         self.win_return: list[float] = []
         self.win_event: list[int] = []
         self.curve: list[list[float]] = []
+
+    def _curriculum(self) -> Curriculum | None:
+        """The active set of hard layouts (``replay_mode = "mastery"``), else ``None``."""
+        c = self.cfg
+        if c.replay_mode != "mastery":
+            return None
+        return Curriculum(
+            self.names, c.mastery_layouts, c.mastery, c.mastery_window, c.mastery_limit
+        )
 
     @property
     def guided(self) -> bool:

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pioneer.deploy.inputs import StudentInputs
+from pioneer.learn.curriculum import Curriculum
 from pioneer.reward.crowdnav import CrowdNavRewardConfig, crowdnav_reward
 from pioneer.seeds import finetune_seed
 from pioneer.sim.events import Event, classify
@@ -36,8 +37,9 @@ from pioneer.sim.world import State, World, observe, step
 __all__ = ["HUMAN_FEATURES", "LayoutEnvs", "ReplayMode", "privileged", "privileged_width"]
 
 F32 = NDArray[np.float32]
-ReplayMode = Literal["mix", "plr"]
-"""How ``replay`` prioritises a pool's layouts (:meth:`LayoutEnvs._draw`)."""
+ReplayMode = Literal["mix", "plr", "mastery"]
+"""How ``replay`` prioritises a pool's layouts (:meth:`LayoutEnvs._draw`; ``"mastery"``:
+:mod:`pioneer.learn.curriculum`)."""
 F64 = NDArray[np.float64]
 ROBOT_FEATURES = 6  # t / T, goal (x, y) in the robot's frame, its distance, (v, ω) last run
 # per person slot: position and velocity in the robot's frame, radius, present, not yet
@@ -123,6 +125,7 @@ class LayoutEnvs:
         max_humans: int,
         replay: float = 0.0,
         replay_mode: ReplayMode = "mix",
+        curriculum: Curriculum | None = None,
     ) -> None:
         self.names = [list(n) for n in names]
         self.size, self.inputs, self.reward = group_size, inputs, reward
@@ -131,6 +134,12 @@ class LayoutEnvs:
         # prioritised layouts: each layout's running failure rate (1 until it is first seen)
         self.replay, self.replay_mode = replay, replay_mode
         self.failure: dict[str, float] = {}
+        # ``"mastery"``: the active set of hard layouts (filled here, before the first draw)
+        if (replay_mode == "mastery") != (curriculum is not None):
+            raise ValueError("a curriculum is given exactly when replay_mode is 'mastery'")
+        self.curriculum = curriculum
+        if self.curriculum is not None:
+            self.curriculum.fill(rng, self.failure)
         self._teachers: dict[str, Any] = {}  # the teacher per base scenario (its reward's)
         self.groups: list[_Group] = []
         for _ in range(groups):
@@ -156,8 +165,12 @@ class LayoutEnvs:
         return sample_state(scenario, np.random.default_rng(seed))
 
     def _new_group(self) -> _Group:
-        pool = self.names[int(self.rng.integers(len(self.names)))]
-        name = pool[self._draw(pool)]
+        cur = self.curriculum
+        if cur is not None and cur.active and self.rng.random() < self.replay:
+            name = cur.draw(self.rng)
+        else:
+            pool = self.names[int(self.rng.integers(len(self.names)))]
+            name = pool[self._draw(pool)]
         sc = get_scenario(name)
         state = State.concat([self._episode(sc) for _ in range(self.size)])
         obs_rng = np.random.default_rng(finetune_seed(self.seed, self.episode_count, "lidar"))
@@ -168,8 +181,9 @@ class LayoutEnvs:
         probability ``replay`` in proportion to its running failure rate, a layout not yet
         seen counting as failing; or, ``"plr"``, with probability ``replay`` a layout already
         seen in proportion to its failure rate, else one not yet seen, uniformly (all seen:
-        any, uniformly) — prioritised level replay (Jiang et al., ICML 2021)."""
-        if self.replay <= 0.0 or len(pool) == 1:
+        any, uniformly) — prioritised level replay (Jiang et al., ICML 2021); ``"mastery"``:
+        uniformly (the curriculum's share is drawn in :meth:`_new_group`)."""
+        if self.replay <= 0.0 or len(pool) == 1 or self.replay_mode == "mastery":
             return int(self.rng.integers(len(pool)))
         if self.replay_mode == "plr":
             seen = np.array([n in self.failure for n in pool])
@@ -247,6 +261,10 @@ class LayoutEnvs:
             for i in np.flatnonzero(done):  # the layout's failure rate, a running mean
                 failed = float(event[i] != Event.SUCCESS)
                 self.failure[grp.name] = 0.9 * self.failure.get(grp.name, failed) + 0.1 * failed
+                if self.curriculum is not None:
+                    self.curriculum.record(
+                        grp.name, not failed, self.episode_count, self.rng, self.failure
+                    )
             for i in np.flatnonzero(done):
                 new.put(int(i), self._episode(grp.scenario))
             grp.state = new
@@ -272,6 +290,7 @@ class LayoutEnvs:
             "layouts": [g.name for g in self.groups],
             "episode_count": self.episode_count,
             "failure": self.failure,
+            **({"curriculum": self.curriculum.state()} if self.curriculum is not None else {}),
             "lidar_rngs": [g.obs_rng.bit_generator.state for g in self.groups],
         }
 
@@ -281,6 +300,8 @@ class LayoutEnvs:
         self.prev_cmd = arrays["prev_cmd"].copy()
         self.episode_count = int(meta["episode_count"])
         self.failure = {str(k): float(v) for k, v in meta.get("failure", {}).items()}
+        if self.curriculum is not None:
+            self.curriculum.restore(meta["curriculum"])
         for g, name in enumerate(meta["layouts"]):
             state = State(**{k: arrays[f"group{g}/{k}"].copy() for k in State.fields()})
             rng = np.random.default_rng()
