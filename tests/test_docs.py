@@ -148,15 +148,23 @@ def _expand(argv: list[str]) -> list[list[str]]:
 
 def _shown_commands() -> dict[tuple[str, ...], str]:
     """Each distinct (global options, leading words) of the commands shown → where first."""
+    from pioneer.cli._app import _TREE
+
     shown: dict[tuple[str, ...], str] = {}
+    commands = set(_TREE.children)
 
     def add(argv: list[str] | None, where: str) -> None:
         for a in _expand(argv) if argv is not None else []:
             i, head = 0, []
-            while i < len(a) and a[i].startswith("-"):  # global options: --scenarios FILE
-                take = 2 if a[i] == "--scenarios" else 1
-                head += ["--scenarios", "FILE"] if take == 2 else [a[i]]
-                i += take
+            while i < len(a) and a[i].startswith("-"):  # global options: --scenarios FILE …
+                if a[i] != "--scenarios":
+                    head.append(a[i])
+                    i += 1
+                    continue
+                i += 1  # its files: up to the next option or command name, as the CLI reads
+                while i < len(a) and not a[i].startswith("-") and a[i] not in commands:
+                    i += 1
+                head += ["--scenarios", "FILE"]
             words = []
             for w in a[i:]:
                 if w.startswith("-") or w in {"…", "..."}:
