@@ -56,7 +56,9 @@ def _student(tmp_path: Path, symmetric: bool = False) -> Path:
     )
     model = build_student(cfg, seed=3)
     gen = torch.Generator().manual_seed(0)
-    model.set_normalizer(torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2))
+    model.set_normalizer(
+        torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2, generator=gen)
+    )
     return save_student(model, tmp_path / "start.safetensors", {"dagger": {"seed": 7}})
 
 
@@ -340,6 +342,11 @@ def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Pa
                    "--teacher-coef", "1")  # fmt: skip
     one_error_line(proc.stderr, proc.returncode, "--teacher-coef")
     variants.unlink()
+    # a curriculum with nothing to practise: no share drawn from it, or single layouts only
+    for extra in (["--scenario", "h?-r?"], ["--scenario", "hr-rl", "hl-rr", "--replay", "0.5"]):
+        proc = run_cli("finetune", "--out", str(tmp_path / "m"), "--student", str(src),
+                       "--replay-mode", "mastery", *extra)  # fmt: skip
+        one_error_line(proc.stderr, proc.returncode, "--replay-mode mastery")
     assert file_tree(tmp_path) == before
 
 

@@ -159,6 +159,15 @@ def finetune_student(
     if not scenarios:
         raise ConfigError(expect("--scenario", "one or more scenarios", "none", "name one"))
     names = [scenario_set(pattern) for pattern in scenarios]
+    if cfg.replay_mode == "mastery" and (cfg.replay <= 0.0 or all(len(p) < 2 for p in names)):
+        raise ConfigError(
+            expect(
+                "--replay-mode mastery",
+                "--replay above 0 and a --scenario pattern of two or more layouts to practise",
+                f"--replay {cfg.replay}, --scenario {' '.join(scenarios)}",
+                "give e.g. --replay 0.5 and a pattern such as 'general-*'",
+            )
+        )
     src = Path(student)
     start = load_student(src)
     obs_dims = {_obs_dim(n) for pool in names for n in pool}
