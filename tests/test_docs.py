@@ -148,23 +148,16 @@ def _expand(argv: list[str]) -> list[list[str]]:
 
 def _shown_commands() -> dict[tuple[str, ...], str]:
     """Each distinct (global options, leading words) of the commands shown → where first."""
-    from pioneer.cli._app import _TREE
+    from pioneer.cli._app import _split
 
     shown: dict[tuple[str, ...], str] = {}
-    commands = set(_TREE.children)
 
     def add(argv: list[str] | None, where: str) -> None:
         for a in _expand(argv) if argv is not None else []:
-            i, head = 0, []
-            while i < len(a) and a[i].startswith("-"):  # global options: --scenarios FILE …
-                if a[i] != "--scenarios":
-                    head.append(a[i])
-                    i += 1
-                    continue
-                i += 1  # its files: up to the next option or command name, as the CLI reads
-                while i < len(a) and not a[i].startswith("-") and a[i] not in commands:
-                    i += 1
-                head += ["--scenarios", "FILE"]
+            head = _split(a)[0]  # the global options, read as the command line reads them
+            i = len(head)  # its files, if any, gathered last behind one --scenarios
+            if "--scenarios" in head:
+                head = [*head[: head.index("--scenarios")], "--scenarios", "FILE"]
             words = []
             for w in a[i:]:
                 if w.startswith("-") or w in {"…", "..."}:
