@@ -71,3 +71,39 @@ def test_older_records_keep_their_layout_version_and_gain_no_measures():
     v2 = {**v1, "time_s": 3.0}
     assert upgrade_record(v2) is v2  # layout 2: nothing to rename
     assert RECORD_FORMAT == 3
+
+
+def _line(**changes: object) -> str:
+    rec = {"scenario": "general-0001", "policy": "teacher", "seed": 0, "trial": 0}
+    rec |= {"event": "success", "time_s": 9.0, "path_length_m": 3.0, "min_gap_m": 0.4}
+    return json.dumps({**rec, "format": 2, "seed_set": "validation", **changes}) + "\n"
+
+
+def test_success_rates_are_each_scenarios_share_of_successes_read_only(tmp_path):
+    from pioneer.eval.records import success_rates
+
+    lines = [_line(trial=t, event="success" if t else "collision") for t in range(4)]
+    lines += [_line(scenario="general-0002", trial=t) for t in range(2)]
+    (tmp_path / "episodes.jsonl").write_text("".join(lines) + lines[0][:20])  # a torn tail
+    before = (tmp_path / "episodes.jsonl").read_bytes()
+    assert success_rates(tmp_path) == {"general-0001": 0.75, "general-0002": 1.0}
+    assert (tmp_path / "episodes.jsonl").read_bytes() == before  # an input: never rewritten
+
+
+@pytest.mark.parametrize(
+    ("lines", "needle"),
+    [
+        ([], "no episodes.jsonl records"),
+        ([_line(seed_set="evaluation")], "validation"),  # never choose on evaluation seeds
+        ([_line(), _line(policy="goal")], "one policy"),
+    ],
+)
+def test_success_rates_refuse_a_folder_that_is_not_one_policys_validation_episodes(
+    tmp_path, lines, needle
+):
+    from pioneer.eval.records import success_rates
+
+    (tmp_path / "episodes.jsonl").write_text("".join(lines))
+    with pytest.raises(Exception, match=needle) as info:
+        success_rates(tmp_path)
+    assert_house_message(str(info.value))

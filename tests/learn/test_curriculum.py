@@ -34,6 +34,28 @@ def test_layouts_join_from_pools_of_several_by_their_failure_rate() -> None:
     assert sorted(cur.active) == ["a0", "a1", "a2", "a3", "b0", "b1"]  # every candidate, once
 
 
+def test_with_a_ceiling_only_layouts_the_teacher_masters_join_by_regret() -> None:
+    # a0: teacher 100 %, student fails (regret 1); a1: teacher 95 %, student 90 % (regret
+    # 0.05); a2: the teacher itself 50 % (never joins); "solo": a pool of one (never joins)
+    ceiling = {"a0": 1.0, "a1": 0.95, "a2": 0.5}
+    failure = {"a0": 1.0, "a1": 0.1, "a2": 1.0}
+    picks = {"a0": 0, "a1": 0}
+    for seed in range(400):
+        cur = Curriculum([["a0", "a1", "a2"], ["solo"]], 1, 0.9, 5, 100, ceiling)
+        cur.fill(np.random.default_rng(seed), failure)
+        picks[cur.active[0]] += 1
+    w = np.array([1.0, 0.05]) + 1e-3  # the regrets (+ 1e-3)
+    assert picks["a0"] / 400 == pytest.approx(w[0] / w.sum(), abs=0.03)
+    cur = Curriculum([["a0", "a1", "a2"], ["solo"]], 5, 0.9, 5, 100, ceiling)
+    cur.fill(np.random.default_rng(0), failure)
+    assert sorted(cur.active) == ["a0", "a1"]  # every layout the teacher masters, no other
+    for _ in range(5):  # a0 mastered: its history names the teacher's success there
+        cur.record("a0", True, 1, np.random.default_rng(0), failure)
+    assert cur.history[0]["outcome"] == "mastered" and cur.history[0]["ceiling"] == 1.0
+    with pytest.raises(ValueError, match=r"no ceiling for 1 layouts, e\.g\. a2"):
+        Curriculum([["a0", "a1", "a2"]], 1, 0.9, 5, 100, {"a0": 1.0, "a1": 1.0})
+
+
 def _oracle(outcomes: list[bool], threshold: float, window: int, limit: int) -> tuple[int, str]:
     """The episode (1-based) at which a layout that joined with no history leaves, and how."""
     for k in range(1, len(outcomes) + 1):

@@ -4,6 +4,7 @@ view, the reward it is paid, the schedule of the pull, resuming and the command 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from pathlib import Path
@@ -213,6 +214,14 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         {"risk_alpha": 0.25, "quantiles": 8},  # risk-sensitive: a distributional critic
         # a curriculum of layouts practised to mastery: its active set and history are saved
         {"replay": 0.5, "replay_mode": "mastery", "mastery_layouts": 1, "mastery_window": 2},
+        # the same following regret (the teacher's success per layout)
+        {
+            "replay": 0.5,
+            "replay_mode": "mastery",
+            "mastery_layouts": 1,
+            "mastery_window": 2,
+            "teacher": {"hr-rl": 1.0, "hl-rr": 0.95},
+        },
     ],
     ids=[
         "prioritised",
@@ -221,15 +230,23 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         "teacher-guided",
         "risk-sensitive",
         "mastery",
+        "regret",
     ],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
     src = _student(tmp_path)
+    change = dict(change)
+    table = change.pop("teacher", None)
     cfg = dataclasses.replace(TINY, **change)
-    whole = finetune_student(src, ["h?-r?"], tmp_path / "a", cfg, progress=False)
+    run = functools.partial(finetune_student, src, ["h?-r?"], progress=False, mastery_teacher=table)
+    whole = run(tmp_path / "a", cfg)
     half = dataclasses.replace(cfg, total_steps=cfg.total_steps // 2)
-    finetune_student(src, ["h?-r?"], tmp_path / "b", half, progress=False)
-    resumed = finetune_student(src, ["h?-r?"], tmp_path / "b", cfg, progress=False)
+    run(tmp_path / "b", half)
+    if table is not None:  # another teacher table is another run
+        with pytest.raises(Exception, match="settings"):
+            finetune_student(src, ["h?-r?"], tmp_path / "b", cfg, progress=False,
+                             mastery_teacher={**table, "hl-rr": 1.0})  # fmt: skip
+    resumed = run(tmp_path / "b", cfg)
     assert resumed["resumed_from_update"] == 2 and resumed["updates"] == whole["updates"] == 4
     assert resumed.get("curriculum") == whole.get("curriculum")  # "mastery": its set, saved
     assert ("curriculum" in whole) == (change.get("replay_mode") == "mastery")
@@ -244,9 +261,7 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[
     curves = [(tmp_path / d / "curve.csv").read_text().splitlines() for d in "ab"]
     assert [r.rsplit(",", 1)[0] for r in curves[0]] == [r.rsplit(",", 1)[0] for r in curves[1]]
     with pytest.raises(Exception, match="settings"):
-        finetune_student(
-            src, ["h?-r?"], tmp_path / "b", dataclasses.replace(cfg, lr=1e-3), progress=False
-        )
+        run(tmp_path / "b", dataclasses.replace(cfg, lr=1e-3))
 
 
 def test_a_checkpoint_written_before_newer_settings_resumes_with_them_at_their_defaults(
@@ -342,6 +357,34 @@ def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Pa
                    "--teacher-coef", "1")  # fmt: skip
     one_error_line(proc.stderr, proc.returncode, "--teacher-coef")
     variants.unlink()
+    # the teacher's table: without the curriculum, or from evaluation seeds
+    folder = tmp_path / "teacher-eval"
+    folder.mkdir()
+    rec = {"scenario": "hr-rl", "policy": "teacher", "seed": 0, "trial": 0, "event": "success"}
+    rec |= {"time_s": 9.0, "path_length_m": 3.0, "min_gap_m": 0.4, "format": 2}
+    (folder / "episodes.jsonl").write_text(json.dumps(rec) + "\n")
+    before = file_tree(tmp_path)
+    for extra in (["--scenario", "hr-rl"], ["--scenario", "hr-rl", "--replay-mode", "mastery"]):
+        proc = run_cli("finetune", "--out", str(tmp_path / "t"), "--student", str(src),
+                       "--mastery-teacher", str(folder), *extra)  # fmt: skip
+        one_error_line(proc.stderr, proc.returncode, "validation")  # evaluation seeds refused
+    assert file_tree(tmp_path) == before
+    (folder / "episodes.jsonl").write_text(json.dumps({**rec, "seed_set": "validation"}) + "\n")
+    before = file_tree(tmp_path)
+    proc = run_cli("finetune", "--out", str(tmp_path / "t"), "--student", str(src),
+                   "--mastery-teacher", str(folder), "--scenario", "hr-rl")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "--replay-mode mastery")
+    proc = run_cli("finetune", "--out", str(tmp_path / "t"), "--student", str(src),
+                   "--mastery-window", "20", "--scenario", "h?-r?")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "--mastery-window")  # not silently ignored
+    proc = run_cli("finetune", "--out", str(tmp_path / "t"), "--student", str(src),
+                   "--mastery-teacher", str(folder), "--scenario", "h?-r?", "--replay", "0.5",
+                   "--replay-mode", "mastery")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "e.g. hl-rr")  # no teacher success there
+    proc = run_cli("finetune", "--out", str(folder), "--student", str(src),
+                   "--mastery-teacher", str(folder), "--scenario", "hr-rl")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "input")  # the output onto an input
+    assert file_tree(tmp_path) == before
     # a curriculum with nothing to practise: no share drawn from it, or single layouts only
     for extra in (["--scenario", "h?-r?"], ["--scenario", "hr-rl", "hl-rr", "--replay", "0.5"]):
         proc = run_cli("finetune", "--out", str(tmp_path / "m"), "--student", str(src),

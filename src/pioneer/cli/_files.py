@@ -89,13 +89,14 @@ def check_outputs(command: object, inputs: Sequence[str] = ()) -> None:
         else:
             output_dir_kind(path)
     read = [*inputs]
-    for name, value, mark in _marked(command, Input):
+    for name, values, mark in _marked(command, Input):
         flag = flag_name(type(command), name)
-        if mark.kind == "file":
-            check_input_file(value, flag)
-        elif not Path(value).exists():
-            raise DataError(expect(flag, "an existing file or folder", value, "check the path"))
-        read.append(value)
+        for value in values if isinstance(values, tuple) else (values,):  # one path or several
+            if mark.kind == "file":
+                check_input_file(value, flag)
+            elif not Path(value).exists():
+                raise DataError(expect(flag, "an existing file or folder", value, "check the path"))
+            read.append(value)
     overwrite = getattr(command, "overwrite", None)
     for _, value, mark in outputs:
         check_not_input(value, read)

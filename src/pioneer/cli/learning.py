@@ -130,6 +130,10 @@ class Finetune:
     equally often (the default: student-general's)"""
     finetune: tyro.conf.OmitArgPrefixes[FinetuneConfig] = FinetuneConfig()
     """fine-tuning settings"""
+    mastery_teacher: Annotated[tuple[str, ...], metavar("DIR"), Input("path")] = ()
+    """with --replay-mode mastery: `pioneer eval --seed-set validation` folders of the teacher
+    on every layout of the patterns; the curriculum then practises only layouts the teacher
+    masters, by how far the student falls below it (regret)"""
     threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")
     """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.3× faster)"""
     resume: Flag = False
@@ -137,7 +141,12 @@ class Finetune:
 
     def run(self) -> int:
         """Fine-tune (or resume); print the outputs and the final statistics (JSON lines)."""
+        from pioneer.eval.records import success_rates
+
         require_some("--scenario", self.scenario)
+        table: dict[str, float] | None = None
+        for folder in self.mastery_teacher:
+            table = {**(table or {}), **success_rates(folder)}
         summary = finetune_student(
             self.student,
             self.scenario,
@@ -146,6 +155,7 @@ class Finetune:
             resume=True if self.resume else None,
             command=command_line(),
             torch_threads=self.threads,
+            mastery_teacher=table,
         )
         student = f"{self.out}/student.safetensors"
         print(to_json({"student": student, "updates": summary["updates"]}))

@@ -12,6 +12,12 @@ of layouts stays in practice until each is mastered:
   succeeded (under the exploration noise), or *dropped* after ``limit`` episodes in the set
   without that (a layout even the teacher may not solve must not hold a place for ever);
   either way a new one joins at once, and a layout that has left does not join again;
+- with a ``ceiling`` — what a reference policy (the privileged teacher) achieves on each
+  layout — the set follows *regret* instead of failure: only layouts whose ceiling reaches
+  ``threshold`` (mastery is achievable there) join, each drawn in proportion to how far the
+  student's running success falls below the ceiling (the premise of prioritised level
+  replay, Jiang et al. 2021, with the teacher as the measure of what is achievable), so no
+  practice goes to layouts even the teacher fails;
 - :class:`~pioneer.learn.layout_env.LayoutEnvs` draws a group's layout from the set with
   probability ``replay``, otherwise as without a curriculum, so the other layouts — the
   mastered ones among them — stay in the mix.
@@ -22,21 +28,36 @@ Its state is JSON (:meth:`Curriculum.state`), saved in the fine-tuning's checkpo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["Curriculum"]
 
 
 class Curriculum:
-    """The active set over ``pools`` (module docstring); draws use the caller's generator."""
+    """The active set over ``pools`` (module docstring); draws use the caller's generator.
+    ``ceiling``: the reference success (0–1) of every layout of the pools with more than one
+    (``None``: follow the failure rate)."""
 
     def __init__(
-        self, pools: Sequence[Sequence[str]], size: int, threshold: float, window: int, limit: int
+        self,
+        pools: Sequence[Sequence[str]],
+        size: int,
+        threshold: float,
+        window: int,
+        limit: int,
+        ceiling: Mapping[str, float] | None = None,
     ) -> None:
+        self.ceiling = None if ceiling is None else {str(k): float(v) for k, v in ceiling.items()}
         self.pools = [list(p) for p in pools if len(p) > 1]
+        if self.ceiling is not None:
+            missing = [n for p in self.pools for n in p if n not in self.ceiling]
+            if missing:
+                raise ValueError(f"no ceiling for {len(missing)} layouts, e.g. {missing[0]}")
+            self.pools = [[n for n in p if self.ceiling[n] >= threshold] for p in self.pools]
         self.size, self.threshold, self.window, self.limit = size, threshold, window, limit
         self.active: list[str] = []
         self.joined: dict[str, int] = {}  # the layout's episode count when it joined
@@ -53,10 +74,19 @@ class Curriculum:
             if not pools:
                 return
             cands = pools[int(rng.integers(len(pools)))]
-            w = np.array([failure.get(n, 1.0) for n in cands]) + 1e-3
+            w = self._weights(cands, failure) + 1e-3
             name = cands[int(rng.choice(len(cands), p=w / w.sum()))]
             self.active.append(name)
             self.joined[name] = self.count.get(name, 0)
+
+    def _weights(self, names: list[str], failure: dict[str, float]) -> NDArray[np.float64]:
+        """Joining weights: the failure rate (one not yet met: 1), or with a ceiling the
+        regret ``max(ceiling − (1 − failure), 0)``."""
+        fail = np.array([failure.get(n, 1.0) for n in names])
+        if self.ceiling is None:
+            return fail
+        top = np.array([self.ceiling[n] for n in names])
+        return np.maximum(top - (1.0 - fail), 0.0)
 
     def draw(self, rng: np.random.Generator) -> str:
         """A layout of the active set, uniformly (the set must not be empty)."""
@@ -91,6 +121,7 @@ class Curriculum:
                 "episodes_in_set": practised,
                 "left_at_episode": episode,
                 "recent_success": float(np.mean(recent)),
+                **({"ceiling": self.ceiling[name]} if self.ceiling is not None else {}),
             }
         )
         self.fill(rng, failure)

@@ -70,6 +70,9 @@ Layouts practised to mastery (optional; ``replay_mode = "mastery"``)
     replaced by another it fails (:mod:`pioneer.learn.curriculum`): depth of practice on the
     cases it fails, where prioritised layouts meet them often but each only for
     ``layout_period`` updates at a time. ``train.json`` lists the layouts mastered and dropped.
+    Given the teacher's success on every layout (``mastery_teacher``), the set follows regret
+    instead: only layouts the teacher drives to ``mastery`` join, by how far the student
+    falls below the teacher there.
 
 Outputs in ``out/`` (each written atomically)::
 
@@ -89,7 +92,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -144,14 +147,18 @@ def finetune_student(
     command: str = "",
     torch_threads: int | None = 1,
     on_update: Callable[[dict[str, float]], None] | None = None,
+    mastery_teacher: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """Fine-tune (or resume) the student at ``student`` over ``scenarios`` (names or patterns
     such as ``general-*``; each entry drawn equally often, a pattern's matches uniformly);
     returns the summary written to ``train.json``.
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
-    ``True`` requires it, ``False`` refuses it. Every input is checked before ``out`` is
-    created; one run writes to ``out`` at a time (:func:`pioneer.io.run_lock`).
+    ``True`` requires it, ``False`` refuses it. ``mastery_teacher``: a reference policy's
+    success (0–1) on every layout of the patterns with more than one (``replay_mode =
+    "mastery"`` only; the curriculum then follows regret, :mod:`pioneer.learn.curriculum`).
+    Every input is checked before ``out`` is created; one run writes to ``out`` at a time
+    (:func:`pioneer.io.run_lock`).
     """
     from pioneer.learn.dagger_folder import scenario_set
 
@@ -168,6 +175,7 @@ def finetune_student(
                 "give e.g. --replay 0.5 and a pattern such as 'general-*'",
             )
         )
+    _check_curriculum(cfg, names, mastery_teacher)
     src = Path(student)
     start = load_student(src)
     obs_dims = {_obs_dim(n) for pool in names for n in pool}
@@ -202,7 +210,7 @@ def finetune_student(
     check_resume(resume, ckpt, out)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
-    tr = FinetuneTrainer(start, names, cfg)
+    tr = FinetuneTrainer(start, names, cfg, mastery_teacher)
     tr.start_info = {k: v for k, v in read_checkpoint_meta(src)["info"].items() if k != "finetune"}
     settings = tr.settings(file_sha256(src))
     with run_lock(out):
@@ -258,6 +266,41 @@ def _curriculum_report(tr: FinetuneTrainer) -> dict[str, Any]:
     if cur is None:
         return {}
     return {"curriculum": {"active": list(cur.active), "left": list(cur.history)}}
+
+
+_CURRICULUM = ("mastery_layouts", "mastery", "mastery_window", "mastery_limit")
+
+
+def _check_curriculum(
+    cfg: FinetuneConfig, names: Sequence[Sequence[str]], table: Mapping[str, float] | None
+) -> None:
+    """The curriculum's settings go with ``replay_mode = "mastery"``, and a teacher table
+    covers every layout it may practise."""
+    plain = FinetuneConfig()
+    given = [f for f in _CURRICULUM if getattr(cfg, f) != getattr(plain, f)]
+    given += ["mastery_teacher"] if table is not None else []
+    if cfg.replay_mode != "mastery" and given:
+        flags = " ".join("--" + f.replace("_", "-") for f in given)
+        raise ConfigError(
+            expect(
+                flags,
+                "--replay-mode mastery (the curriculum they set)",
+                f"--replay-mode {cfg.replay_mode}",
+                f"add --replay-mode mastery or drop {flags}",
+            )
+        )
+    if table is None:
+        return
+    missing = [n for pool in names if len(pool) > 1 for n in pool if n not in table]
+    if missing:
+        raise ConfigError(
+            expect(
+                "--mastery-teacher",
+                "the teacher's success on every layout of the --scenario patterns",
+                f"none for {len(missing)} layout(s), e.g. {missing[0]}",
+                "evaluate the teacher on those layouts (pioneer eval --seed-set validation)",
+            )
+        )
 
 
 def _obs_dim(name: str) -> int:

@@ -5,9 +5,10 @@
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -67,8 +68,15 @@ def _with_new_defaults(stored: dict[str, Any]) -> dict[str, Any]:
 class FinetuneTrainer:
     """Everything that changes during fine-tuning (saved whole in the checkpoint)."""
 
-    def __init__(self, start: Student, names: Sequence[Sequence[str]], cfg: FinetuneConfig) -> None:
+    def __init__(
+        self,
+        start: Student,
+        names: Sequence[Sequence[str]],
+        cfg: FinetuneConfig,
+        ceiling: Mapping[str, float] | None = None,
+    ) -> None:
         self.cfg, self.names = cfg, [list(n) for n in names]
+        self.ceiling = None if ceiling is None else dict(ceiling)  # the curriculum's (regret)
         self.start_info: dict[str, Any] = {}  # the starting student's checkpoint info
         self.actor = start.eval()
         self.ref = copy.deepcopy(start).eval().requires_grad_(False)
@@ -119,7 +127,12 @@ class FinetuneTrainer:
         if c.replay_mode != "mastery":
             return None
         return Curriculum(
-            self.names, c.mastery_layouts, c.mastery, c.mastery_window, c.mastery_limit
+            self.names,
+            c.mastery_layouts,
+            c.mastery,
+            c.mastery_window,
+            c.mastery_limit,
+            self.ceiling,
         )
 
     @property
@@ -368,7 +381,11 @@ class FinetuneTrainer:
     def settings(self, student_sha256: str) -> dict[str, Any]:
         """What must match between a checkpoint and a resuming command."""
         cfg = {k: v for k, v in self.cfg.to_dict().items() if k not in _NOT_SETTINGS}
-        return {"finetune": cfg, "student_sha256": student_sha256, "scenarios": self.names}
+        out = {"finetune": cfg, "student_sha256": student_sha256, "scenarios": self.names}
+        if self.ceiling is not None:  # the curriculum's reference success per layout
+            table = json.dumps(sorted(self.ceiling.items())).encode()
+            out["mastery_teacher_sha256"] = hashlib.sha256(table).hexdigest()
+        return out
 
     def save(self, path: Path, settings: dict[str, Any]) -> None:
         """The whole training state to ``path`` (safetensors + JSON metadata, atomically)."""
