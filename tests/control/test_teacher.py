@@ -680,6 +680,33 @@ def test_a_patient_teacher_that_keeps_its_margins_drops_only_the_learned_term():
     )
 
 
+def test_an_impatient_teacher_with_a_goal_weight_is_drawn_back_from_beyond_its_start():
+    # eq. 18's α_goal = 2 (1 − r) vanishes once the robot is farther from the goal than it
+    # started (r ≥ 1); with the learned term dropped nothing then draws it back
+    at, d0 = _placed_on_the_way()
+    world = NavEnv("hr-rl").world
+    far = at(5.0, 1.1 * d0)  # beyond its start, facing away: no candidate gets within d0
+    robot = far.robot.copy()
+    robot[0, 2] -= np.pi
+    far = dataclasses.replace(far, robot=robot)
+    kw = {"patience": 0.5, "patience_hold": 100.0, "patience_keep_margins": True}
+    adaptive = make_teacher("hr-rl", **kw)
+    adaptive._progress = (0.0, 4.0)  # no progress for 1 s
+    assert adaptive.decide(world, far).terms["goal"] == 0.0
+    weighted = make_teacher("hr-rl", **kw, patience_goal_weight=2.0)
+    weighted._progress = (0.0, 4.0)
+    got = weighted.decide(world, far)
+    assert got.terms["goal"] > 0.0
+    # oracle: the teacher without R_den whose goal weight is 2 everywhere
+    rules = make_teacher("hr-rl", density=False, patience=0)
+    rules.config = dataclasses.replace(
+        rules.config, weights=dataclasses.replace(rules.config.weights, goal_weight=2.0)
+    )
+    want = rules.decide(world, far)
+    np.testing.assert_array_equal(got.scores, want.scores)
+    np.testing.assert_array_equal(got.command, want.command)
+
+
 def test_a_stuck_teacher_gives_up_the_margin_to_people_but_not_the_walls():
     # oracle: stuck (no progress for `after` seconds), the teacher decides as the teacher
     # without R_den and without the human margin; within its hold after progress, as one that

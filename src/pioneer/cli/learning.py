@@ -56,6 +56,7 @@ config_flags(
     hold="patience_hold",
     keep_margins="patience_keep_margins",
     stuck_drops_human_margin="patience_stuck_drops_human_margin",
+    goal_weight="patience_goal_weight",
 )
 config_flags(StudentConfig, kind="student", obs_dim=None)  # obs_dim: the observation's width
 config_flags(PPOConfig, total_steps="steps", n_envs="envs")

@@ -161,6 +161,11 @@ class Patience(Config):
     # within its hold), it gives up the margin to people — never the wall's: hugging a wall
     # traps a robot that only drives forward — until it makes progress again
     stuck_drops_human_margin: bool = False
+    # impatient, the goal term's weight α_goal in place of eq. 18's adaptive 2 (1 − r), which
+    # vanishes once the robot is farther from the goal than it started (r ≥ 1): without the
+    # learned term nothing then draws it back, and the obstacle term alone drives it away
+    # from everyone (None: eq. 18's)
+    goal_weight: NonNegative | None = None
 
     @property
     def active(self) -> bool:
@@ -363,7 +368,12 @@ class LookaheadTeacher:
         """Every candidate's scores; ``impatient``: by the rule terms alone, among all feasible
         candidates (:class:`Patience`)."""
         cfg = self.config
-        w = dataclasses.replace(cfg.weights, use_density=False) if impatient else cfg.weights
+        w = cfg.weights
+        if impatient:
+            goal_weight = (
+                w.goal_weight if cfg.patience.goal_weight is None else cfg.patience.goal_weight
+            )
+            w = dataclasses.replace(w, use_density=False, goal_weight=goal_weight)
         ro = rollout(
             world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model, cfg.precision
         )
@@ -447,6 +457,7 @@ def make_teacher(
     patience_hold: float = Patience.hold,
     patience_keep_margins: bool = Patience.keep_margins,
     patience_stuck_drops_human_margin: bool = Patience.stuck_drops_human_margin,
+    patience_goal_weight: float | None = Patience.goal_weight,
     patient: bool = False,
     name: str = "teacher",
 ) -> LookaheadTeacher:
@@ -459,9 +470,9 @@ def make_teacher(
     every person (:class:`Assumptions`; beyond the paper); ``patience`` [s] how long it holds
     to its margins and learned term without progress (:class:`Patience`; 0: always, as the
     paper's teacher), ``patience_progress`` [m], ``patience_hold`` [s],
-    ``patience_keep_margins`` and ``patience_stuck_drops_human_margin`` the rest of
-    :class:`Patience`; ``patient``: :data:`PATIENT` instead of those five (the policy
-    ``teacher-patient``)."""
+    ``patience_keep_margins``, ``patience_stuck_drops_human_margin`` and
+    ``patience_goal_weight`` the rest of :class:`Patience`; ``patient``: :data:`PATIENT`
+    instead of those six (the policy ``teacher-patient``)."""
     model = None
     if density:
         # ``reward`` may contain "{scenario}" so one policy spec serves every scenario.
@@ -488,6 +499,7 @@ def make_teacher(
             hold=patience_hold,
             keep_margins=patience_keep_margins,
             stuck_drops_human_margin=patience_stuck_drops_human_margin,
+            goal_weight=patience_goal_weight,
         ),
     )
     return LookaheadTeacher(model, features=features, config=cfg, name=name)
