@@ -175,8 +175,9 @@ class Patience(Config):
 
 # Chosen on validation episodes of the examples/ variants and the paper worlds (docs/teacher.md):
 # no 0.4 m of progress in 2 s (a crawl below 0.2 m/s) and the learned term is dropped for the rest
-# of the episode (100 s: longer than any episode here); the margins stay.
-PATIENT = Patience(after=2.0, progress=0.4, hold=100.0, keep_margins=True)
+# of the episode (100 s: longer than any episode here); the margins stay; the goal term keeps
+# weight 2 (eq. 18's α_den + α_goal at r = 1/2) so that nothing but the goal replaces the term.
+PATIENT = Patience(after=2.0, progress=0.4, hold=100.0, keep_margins=True, goal_weight=2.0)
 
 
 @dataclasses.dataclass(frozen=True)
