@@ -385,6 +385,15 @@ def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Pa
                    "--mastery-teacher", str(folder), "--scenario", "hr-rl")  # fmt: skip
     one_error_line(proc.stderr, proc.returncode, "input")  # the output onto an input
     assert file_tree(tmp_path) == before
+    failed = {**rec, "seed_set": "validation", "event": "collision"}
+    lines = [json.dumps({**failed, "scenario": n}) + "\n" for n in ("hr-rl", "hl-rr")]
+    (folder / "episodes.jsonl").write_text("".join(lines))
+    before = file_tree(tmp_path)
+    proc = run_cli("finetune", "--out", str(tmp_path / "t"), "--student", str(src),
+                   "--mastery-teacher", str(folder), "--scenario", "h?-r?", "--replay", "0.5",
+                   "--replay-mode", "mastery")  # fmt: skip
+    one_error_line(proc.stderr, proc.returncode, "a layout the teacher drives")  # none to practise
+    assert file_tree(tmp_path) == before
     # a curriculum with nothing to practise: no share drawn from it, or single layouts only
     for extra in (["--scenario", "h?-r?"], ["--scenario", "hr-rl", "hl-rr", "--replay", "0.5"]):
         proc = run_cli("finetune", "--out", str(tmp_path / "m"), "--student", str(src),

@@ -301,6 +301,15 @@ def _check_curriculum(
                 "evaluate the teacher on those layouts (pioneer eval --seed-set validation)",
             )
         )
+    if not any(table[n] >= cfg.mastery for pool in names if len(pool) > 1 for n in pool):
+        raise ConfigError(
+            expect(
+                "--mastery-teacher",
+                f"a layout the teacher drives to --mastery {cfg.mastery} (one to practise)",
+                "none",
+                "lower --mastery or give layouts the teacher drives",
+            )
+        )
 
 
 def _obs_dim(name: str) -> int:
