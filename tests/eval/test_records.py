@@ -80,7 +80,7 @@ def _line(**changes: object) -> str:
 
 
 def test_success_rates_are_each_scenarios_share_of_successes_read_only(tmp_path):
-    from pioneer.eval.records import success_rates
+    from pioneer.eval.report import success_rates
 
     lines = [_line(trial=t, event="success" if t else "collision") for t in range(4)]
     lines += [_line(scenario="general-0002", trial=t) for t in range(2)]
@@ -101,7 +101,7 @@ def test_success_rates_are_each_scenarios_share_of_successes_read_only(tmp_path)
 def test_success_rates_refuse_a_folder_that_is_not_one_policys_validation_episodes(
     tmp_path, lines, needle
 ):
-    from pioneer.eval.records import success_rates
+    from pioneer.eval.report import success_rates
 
     (tmp_path / "episodes.jsonl").write_text("".join(lines))
     with pytest.raises(Exception, match=needle) as info:

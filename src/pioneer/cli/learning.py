@@ -142,7 +142,7 @@ class Finetune:
 
     def run(self) -> int:
         """Fine-tune (or resume); print the outputs and the final statistics (JSON lines)."""
-        from pioneer.eval.records import success_rates
+        from pioneer.eval.report import success_rates
 
         require_some("--scenario", self.scenario)
         table: dict[str, float] | None = None

@@ -161,10 +161,7 @@ class Patience(Config):
     # within its hold), it gives up the margin to people — never the wall's: hugging a wall
     # traps a robot that only drives forward — until it makes progress again
     stuck_drops_human_margin: bool = False
-    # impatient, the goal term's weight α_goal in place of eq. 18's adaptive 2 (1 − r), which
-    # vanishes once the robot is farther from the goal than it started (r ≥ 1): without the
-    # learned term nothing then draws it back, and the obstacle term alone drives it away
-    # from everyone (None: eq. 18's)
+    # impatient, α_goal for eq. 18's 2 (1 − r), 0 beyond the start's distance (None: eq. 18's)
     goal_weight: NonNegative | None = None
 
     @property
@@ -175,8 +172,8 @@ class Patience(Config):
 
 # Chosen on validation episodes of the examples/ variants and the paper worlds (docs/teacher.md):
 # no 0.4 m of progress in 2 s (a crawl below 0.2 m/s) and the learned term is dropped for the rest
-# of the episode (100 s: longer than any episode here); the margins stay; the goal term keeps
-# weight 2 (eq. 18's α_den + α_goal at r = 1/2) so that nothing but the goal replaces the term.
+# of the episode (100 s: longer than any episode here); the margins stay; α_goal = 2 (eq. 18's
+# α_den + α_goal at r = 1/2): the goal takes the dropped term's share.
 PATIENT = Patience(after=2.0, progress=0.4, hold=100.0, keep_margins=True, goal_weight=2.0)
 
 
@@ -369,12 +366,9 @@ class LookaheadTeacher:
         """Every candidate's scores; ``impatient``: by the rule terms alone, among all feasible
         candidates (:class:`Patience`)."""
         cfg = self.config
-        w = cfg.weights
-        if impatient:
-            goal_weight = (
-                w.goal_weight if cfg.patience.goal_weight is None else cfg.patience.goal_weight
-            )
-            w = dataclasses.replace(w, use_density=False, goal_weight=goal_weight)
+        w, g = cfg.weights, cfg.patience.goal_weight
+        g = w.goal_weight if g is None else g
+        w = dataclasses.replace(w, use_density=False, goal_weight=g) if impatient else w
         ro = rollout(
             world, state, self.candidates, cfg.horizon, cfg.dt, cfg.human_model, cfg.precision
         )

@@ -266,35 +266,3 @@ def check_seed_set(path: Path, records: Sequence[Mapping[str, Any]], seed_set: s
                 "evaluate into another --out",
             )
         )
-
-
-def success_rates(folder: str | Path, seed_set: str = "validation") -> dict[str, float]:
-    """Each scenario's share of successful episodes (0–1) in the evaluation folder ``folder``
-    (its ``episodes.jsonl``, read only), which must hold one policy's episodes of ``seed_set``:
-    e.g. the teacher's success on every training layout, for the fine-tuning's curriculum."""
-    p = Path(folder) / "episodes.jsonl"
-    records = parse_records(p)[0] if p.is_file() else []
-    if not records:
-        raise DataError(
-            expect(
-                str(folder),
-                "a `pioneer eval` output folder with episodes",
-                "none" if not p.parent.is_dir() else "no episodes.jsonl records",
-                "evaluate the policy there first (pioneer eval --out …)",
-            )
-        )
-    check_seed_set(p, records, seed_set)
-    policies = sorted({str(r["policy"]) for r in records})
-    if len(policies) != 1:
-        raise DataError(
-            expect(
-                f"{p}: policies",
-                "one policy's episodes",
-                ", ".join(policies),
-                "evaluate that policy alone into its own --out",
-            )
-        )
-    won: dict[str, list[bool]] = {}
-    for r in records:
-        won.setdefault(str(r["scenario"]), []).append(r["event"] == "success")
-    return {name: sum(w) / len(w) for name, w in sorted(won.items())}

@@ -21,7 +21,14 @@ from pioneer.eval.tables import (
 )
 from pioneer.io import to_json, write_text_atomic
 
-__all__ = ["TableSpec", "metric_tables", "summarize_run", "summary_texts", "write_summary"]
+__all__ = [
+    "TableSpec",
+    "metric_tables",
+    "success_rates",
+    "summarize_run",
+    "summary_texts",
+    "write_summary",
+]
 
 # (paper table id, title, scenarios, policies)
 TableSpec = tuple[str, str, Sequence[str], Sequence[str]]
@@ -194,3 +201,38 @@ def _summarize_records(
             )
         )
     return summarize(records)
+
+
+def success_rates(folder: str | Path, seed_set: str = "validation") -> dict[str, float]:
+    """Each scenario's share of successful episodes (0–1) in the evaluation folder ``folder``
+    (its ``episodes.jsonl``, read only), which must hold one policy's episodes of ``seed_set``:
+    e.g. the teacher's success on every training layout, for the fine-tuning's curriculum."""
+    from pioneer.eval.harness import EPISODES_FILE
+    from pioneer.eval.records import check_seed_set, parse_records
+
+    p = Path(folder) / EPISODES_FILE
+    records = parse_records(p)[0] if p.is_file() else []
+    if not records:
+        raise DataError(
+            expect(
+                str(folder),
+                "a `pioneer eval` output folder with episodes",
+                "none" if not p.parent.is_dir() else f"no {EPISODES_FILE} records",
+                "evaluate the policy there first (pioneer eval --out …)",
+            )
+        )
+    check_seed_set(p, records, seed_set)
+    policies = sorted({str(r["policy"]) for r in records})
+    if len(policies) != 1:
+        raise DataError(
+            expect(
+                f"{p}: policies",
+                "one policy's episodes",
+                ", ".join(policies),
+                "evaluate that policy alone into its own --out",
+            )
+        )
+    won: dict[str, list[bool]] = {}
+    for r in records:
+        won.setdefault(str(r["scenario"]), []).append(r["event"] == "success")
+    return {name: sum(w) / len(w) for name, w in sorted(won.items())}
