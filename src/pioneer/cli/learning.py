@@ -145,9 +145,8 @@ class Finetune:
         from pioneer.eval.report import success_rates
 
         require_some("--scenario", self.scenario)
-        table: dict[str, float] | None = None
-        for folder in self.mastery_teacher:
-            table = {**(table or {}), **success_rates(folder)}
+        folders = self.mastery_teacher
+        table = {k: v for f in folders for k, v in success_rates(f).items()} if folders else None
         summary = finetune_student(
             self.student,
             self.scenario,

@@ -166,16 +166,7 @@ def finetune_student(
     if not scenarios:
         raise ConfigError(expect("--scenario", "one or more scenarios", "none", "name one"))
     names = [scenario_set(pattern) for pattern in scenarios]
-    if cfg.replay_mode == "mastery" and (cfg.replay <= 0.0 or all(len(p) < 2 for p in names)):
-        raise ConfigError(
-            expect(
-                "--replay-mode mastery",
-                "--replay above 0 and a --scenario pattern of two or more layouts to practise",
-                f"--replay {cfg.replay}, --scenario {' '.join(scenarios)}",
-                "give e.g. --replay 0.5 and a pattern such as 'general-*'",
-            )
-        )
-    _check_curriculum(cfg, names, mastery_teacher)
+    _check_curriculum(cfg, scenarios, names, mastery_teacher)
     src = Path(student)
     start = load_student(src)
     obs_dims = {_obs_dim(n) for pool in names for n in pool}
@@ -272,10 +263,22 @@ _CURRICULUM = ("mastery_layouts", "mastery", "mastery_window", "mastery_limit")
 
 
 def _check_curriculum(
-    cfg: FinetuneConfig, names: Sequence[Sequence[str]], table: Mapping[str, float] | None
+    cfg: FinetuneConfig,
+    scenarios: Sequence[str],
+    names: Sequence[Sequence[str]],
+    table: Mapping[str, float] | None,
 ) -> None:
-    """The curriculum's settings go with ``replay_mode = "mastery"``, and a teacher table
-    covers every layout it may practise."""
+    """The curriculum has something to practise, its settings go with ``replay_mode =
+    "mastery"``, and a teacher table covers every layout it may practise."""
+    if cfg.replay_mode == "mastery" and (cfg.replay <= 0.0 or all(len(p) < 2 for p in names)):
+        raise ConfigError(
+            expect(
+                "--replay-mode mastery",
+                "--replay above 0 and a --scenario pattern of two or more layouts to practise",
+                f"--replay {cfg.replay}, --scenario {' '.join(scenarios)}",
+                "give e.g. --replay 0.5 and a pattern such as 'general-*'",
+            )
+        )
     plain = FinetuneConfig()
     given = [f for f in _CURRICULUM if getattr(cfg, f) != getattr(plain, f)]
     given += ["mastery_teacher"] if table is not None else []
