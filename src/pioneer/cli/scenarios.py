@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import tyro
 
@@ -115,6 +115,22 @@ class Calibrate:
         return 0
 
 
+def _counts_drawn(variants: dict[str, dict[str, Any]]) -> str:
+    """How many layouts have each number of boarders and of exiting passengers: a redrawn
+    draw is more often a crowded one, so without ``--keep-counts`` these can fall short of the
+    ranges asked for."""
+    from collections import Counter
+
+    from pioneer.sim.scenarios.layouts import ElevatorLayout
+
+    paper = ElevatorLayout()
+    parts = []
+    for key, what in (("n_boarding", "boarders"), ("n_exiting", "exiting passengers")):
+        n = Counter(int(v["elevator"].get(key, getattr(paper, key))) for v in variants.values())
+        parts.append(f"{what} " + ", ".join(f"{k}: {n[k]}" for k in sorted(n)))
+    return "layouts with " + "; ".join(parts)
+
+
 @dataclasses.dataclass(frozen=True)
 class SampleLayouts:
     """Draw valid elevator layouts from the randomised distribution (LayoutDistribution) into
@@ -160,6 +176,7 @@ class SampleLayouts:
             end="",
         )
         print(self.out)
+        print(_counts_drawn(variants))
         return 0
 
     def _kept(self, done: int) -> str:

@@ -136,6 +136,10 @@ def test_the_command_writes_a_scenario_file(tmp_path):
         "general-0001",
     ]
     assert doc["distribution"]["seed"] == 3
+    # the numbers of people drawn, counted from the file (they may fall short of the ranges)
+    n = [e["elevator"].get("n_boarding", 2) for e in doc["scenarios"].values()]
+    line = res.stdout.strip().splitlines()[-1]
+    assert line.startswith("layouts with boarders ") and f"{n[0]}: " in line
     listed = run_cli("--scenarios", str(out), "scenarios")
     assert listed.returncode == 0 and "general-0001" in listed.stdout
     bad = run_cli("sample-layouts", "--n", "0", "--out", str(tmp_path / "none.json"))
@@ -223,3 +227,52 @@ def test_layouts_without_queue_and_with_deep_exits_are_valid_scenarios(clean_reg
         for s in range(5):  # every start state is collision-free, nobody outside the walls
             st = sample_state(cfg, np.random.default_rng(1000 + s))
             assert st.gap[0] > 0.0 and st.wall_gap[0] > 0.0
+
+
+def test_kept_counts_follow_their_ranges_where_a_plain_draw_skews_them(monkeypatch):
+    """Rejection of the whole draw skews the counts towards placeable (uncrowded) ones; with
+    ``keep_counts`` the counts are drawn first and only the rest is redrawn, so they follow
+    their ranges — except numbers that no geometry holds within MAX_DRAWS draws, dropped.
+    The placement check is replaced by one that refuses every two-passenger layout in half
+    its draws and every three-boarders-and-two-passengers layout always."""
+    from pioneer.sim.scenarios import distribution
+
+    rng = np.random.default_rng(5)
+    counts = [distribution.draw_counts(LayoutDistribution(), rng) for _ in range(3000)]
+    for i, values in ((0, (1, 2, 3)), (1, (0, 1, 2))):
+        share = np.bincount([c[i] for c in counts], minlength=4)[list(values)] / len(counts)
+        assert np.all(np.abs(share - 1 / 3) < 0.04)  # 3,000 draws: ±0.04 is > 4 σ
+
+    def placement(name, cfg, budget):
+        lay = cfg.layout
+        if lay.n_exiting >= 2 and (lay.n_boarding == 3 or placement.rng.random() < 0.5):
+            raise ScenarioError("not placed")
+        return 1
+
+    monkeypatch.setattr(distribution, "check_placement", placement)
+    monkeypatch.setattr(distribution, "elevator_scenario", lambda lay, sim, name: _Cfg(lay))
+    dist = LayoutDistribution(n_boarding=(2, 3), n_exiting=(1, 2), human_radius=(0.45, 0.6))
+
+    def drawn(keep: bool) -> list[tuple[int, int]]:
+        placement.rng = np.random.default_rng(0)
+        d = dataclasses.replace(dist, keep_counts=keep)
+        out = []
+        for _, entry, _ in distribution.draw_variants(d, 300, seed=4):
+            e = {**ElevatorLayout().to_dict(), **entry["elevator"]}
+            out.append((e["n_boarding"], e["n_exiting"]))
+            if keep and e["n_exiting"] >= 2:  # two passengers start anywhere in the depth
+                assert e["exit_start_y"] is not None
+        return out
+
+    plain, kept = drawn(False), drawn(True)
+    assert (3, 2) not in plain and (3, 2) not in kept  # never placeable
+    share = lambda c, x: np.mean([y == x for y in c])  # noqa: E731
+    # plain: a draw of (2, 2) survives half the time, (3, 2) never: (2, 2) ≈ 1/8 / (5/8)
+    assert 0.12 < share(plain, (2, 2)) < 0.28
+    for c in ((2, 1), (2, 2), (3, 1)):  # kept: a third each once (3, 2) is dropped
+        assert 0.25 < share(kept, c) < 0.42, c  # 300 layouts: ±0.08 is > 3 σ
+
+
+class _Cfg:
+    def __init__(self, layout: ElevatorLayout) -> None:
+        self.layout = layout

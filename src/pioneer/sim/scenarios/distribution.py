@@ -35,6 +35,7 @@ __all__ = [
     "MAX_LAYOUTS",
     "MIN_PLACEMENT_RATE",
     "LayoutDistribution",
+    "draw_counts",
     "draw_variants",
     "sample_layout",
     "sample_variants",
@@ -77,12 +78,21 @@ class LayoutDistribution(Config):
     deep_exit_share: UnitInterval = 0.0
     # the humans' sides to draw from: "right" → HR-RL, "left" → HL-RR
     sides: Annotated[tuple[HumanSide, ...], MinLen(1)] = ("right", "left")
+    # draw the numbers of boarders and exiting passengers once per layout and redraw only
+    # the rest until its bodies are placed, so the numbers follow their ranges (two or more
+    # exiting passengers then start anywhere in the cabin's depth, as three boarders queue
+    # in the lobby's whole back); off, the whole draw is redrawn, and crowded numbers,
+    # placed less often, come out rarer than their ranges say (two passengers hardly ever)
+    keep_counts: bool = False
 
 
 def sample_layout(
-    dist: LayoutDistribution, rng: np.random.Generator
+    dist: LayoutDistribution,
+    rng: np.random.Generator,
+    counts: tuple[int, int] | None = None,
 ) -> tuple[ElevatorLayout, SimConfig]:
-    """One draw of the distribution (not yet checked for placement)."""
+    """One draw of the distribution (not yet checked for placement); ``counts``: the numbers
+    of boarders and exiting passengers, already drawn (:func:`draw_counts`)."""
 
     def u(r: Range) -> float:
         return round(float(rng.uniform(*r)), 3)
@@ -96,7 +106,7 @@ def sample_layout(
     w, d = u(dist.lobby_width), u(dist.lobby_depth)
     cabin_w = min(u(dist.cabin_width), w)
     sw, sd = w / PAPER.lobby_width, d / PAPER.lobby_depth  # the paper world's proportions
-    n_boarding = k(dist.n_boarding)
+    n_boarding = k(dist.n_boarding) if counts is None else counts[0]
     scale = u(dist.v_pref_scale)
     boarder_y = _scaled(PAPER.boarder_y, sd)
     if n_boarding >= 3:  # they queue in depth: give them the whole back of the lobby
@@ -110,7 +120,7 @@ def sample_layout(
         lobby_width=w,
         lobby_depth=d,
         n_boarding=n_boarding,
-        n_exiting=k(dist.n_exiting),
+        n_exiting=k(dist.n_exiting) if counts is None else counts[1],
         human_radius=u(dist.human_radius),
         v_pref_choices=tuple(round(v * scale, 3) for v in PAPER.v_pref_choices),
         robot_start_y=_scaled(PAPER.robot_start_y, sd),
@@ -128,11 +138,21 @@ def sample_layout(
     )
     if not p(dist.queue_share):
         layout = dataclasses.replace(layout, boarders_queue=False)
-    if p(dist.deep_exit_share):  # from just inside the door to the cabin's back wall
+    deep_crowd = counts is not None and counts[1] >= 2  # keep_counts: room for two or more
+    if p(dist.deep_exit_share) or deep_crowd:  # from just inside the door to the back wall
         r_h = layout.human_radius
         deep = (round(r_h + 0.1, 3), round(layout.cabin_depth - r_h - layout.margin, 3))
         layout = dataclasses.replace(layout, exit_start_y=deep)
     return layout, sim
+
+
+def draw_counts(dist: LayoutDistribution, rng: np.random.Generator) -> tuple[int, int]:
+    """The numbers of boarders and exiting passengers of one layout, each uniform over its
+    range (``keep_counts``: drawn once, before the rest is redrawn until placed)."""
+    lo, hi = dist.n_boarding
+    n_boarding = int(rng.integers(lo, hi + 1))
+    lo, hi = dist.n_exiting
+    return n_boarding, int(rng.integers(lo, hi + 1))
 
 
 def _scaled(
@@ -193,26 +213,30 @@ def _draws(
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E0E]))
     rejected = 0
     budget = PLACEMENT_CHECK_SEEDS / MIN_PLACEMENT_RATE  # [draws] beyond it the rate is too low
+    unplaceable: set[tuple[int, int]] = set()  # keep_counts: numbers no geometry held
     for index in range(n):
-        for _ in range(MAX_DRAWS):
-            layout, sim = sample_layout(dist, rng)
-            name = f"{prefix}-{index:04d}"
-            try:
-                draws = check_placement(name, elevator_scenario(layout, sim=sim, name=name), budget)
-            except PioneerError:
-                rejected += 1
-                continue
-            if draws > budget:
-                rejected += 1  # placeable for these seeds, but too tight to be sure for all
-                continue
-            entry = {
-                "elevator": _changed(layout, ElevatorLayout()) | {"human_side": layout.human_side},
-                "sim": _changed(sim, SimConfig()),
-                "base": "hr-rl" if layout.human_side == "right" else "hl-rr",
-            }
-            yield name, entry, rejected
-            break
-        else:
+        name = f"{prefix}-{index:04d}"
+        counts = _placeable_counts(dist, rng, unplaceable)
+        while True:
+            found = None
+            for _ in range(MAX_DRAWS):
+                layout, sim = sample_layout(dist, rng, counts)
+                try:
+                    scenario = elevator_scenario(layout, sim=sim, name=name)
+                    draws = check_placement(name, scenario, budget)
+                except PioneerError:
+                    rejected += 1
+                    continue
+                if draws > budget:
+                    rejected += 1  # placeable for these seeds, but too tight to be sure for all
+                    continue
+                found = layout, sim
+                break
+            if found is not None or counts is None:
+                break
+            unplaceable.add(counts)  # these numbers do not fit: others, from now on
+            counts = _placeable_counts(dist, rng, unplaceable)
+        if found is None:
             raise ScenarioError(
                 expect(
                     "layout distribution",
@@ -221,3 +245,34 @@ def _draws(
                     "widen the lobby ranges or shrink the humans",
                 )
             )
+        layout, sim = found
+        entry = {
+            "elevator": _changed(layout, ElevatorLayout()) | {"human_side": layout.human_side},
+            "sim": _changed(sim, SimConfig()),
+            "base": "hr-rl" if layout.human_side == "right" else "hl-rr",
+        }
+        yield name, entry, rejected
+
+
+def _placeable_counts(
+    dist: LayoutDistribution, rng: np.random.Generator, unplaceable: set[tuple[int, int]]
+) -> tuple[int, int] | None:
+    """``keep_counts``: numbers of boarders and passengers drawn uniformly among those not yet
+    found unplaceable (``None`` without ``keep_counts``)."""
+    if not dist.keep_counts:
+        return None
+    (b0, b1), (e0, e1) = dist.n_boarding, dist.n_exiting
+    every = [(b, e) for b in range(b0, b1 + 1) for e in range(e0, e1 + 1)]
+    if all(c in unplaceable for c in every):
+        raise ScenarioError(
+            expect(
+                "layout distribution",
+                "numbers of boarders and exiting passengers whose bodies can be placed",
+                f"none of {sorted(unplaceable)} within {MAX_DRAWS} draws each",
+                "widen the lobby ranges or shrink the humans",
+            )
+        )
+    while True:
+        counts = draw_counts(dist, rng)
+        if counts not in unplaceable:
+            return counts
