@@ -9,7 +9,9 @@ returns them as scenario-file entries (``pioneer.scenarios/1``, each with the bu
 of its side, whose demonstrations give the teacher's reward); a draw that cannot place its
 bodies for the start seeds a scenario file is checked with, or places them in fewer than
 :data:`MIN_PLACEMENT_RATE` of its start-state draws (too tight to be sure of every other
-seed), is redrawn, and counted.
+seed), is redrawn, and counted. Crowded draws are the ones redrawn most, so the numbers of
+boarders and passengers come out below their ranges; ``keep_counts`` draws them first and
+redraws only the rest.
 
     pioneer sample-layouts --n 200 --seed 0 --out runs/general/layouts.json
 """
