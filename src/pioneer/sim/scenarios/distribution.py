@@ -100,7 +100,7 @@ def sample_layout(
         return round(float(rng.uniform(*r)), 3)
 
     def k(r: tuple[int, int]) -> int:
-        return int(rng.integers(r[0], r[1] + 1))
+        return _integer(rng, r)
 
     def p(share: float) -> bool:  # no draw at 0 or 1: the draws of other layouts stay the same
         return share >= 1.0 or (share > 0.0 and bool(rng.random() < share))
@@ -151,10 +151,13 @@ def sample_layout(
 def draw_counts(dist: LayoutDistribution, rng: np.random.Generator) -> tuple[int, int]:
     """The numbers of boarders and exiting passengers of one layout, each uniform over its
     range (``keep_counts``: drawn once, before the rest is redrawn until placed)."""
-    lo, hi = dist.n_boarding
-    n_boarding = int(rng.integers(lo, hi + 1))
-    lo, hi = dist.n_exiting
-    return n_boarding, int(rng.integers(lo, hi + 1))
+    n_boarding = _integer(rng, dist.n_boarding)
+    return n_boarding, _integer(rng, dist.n_exiting)
+
+
+def _integer(rng: np.random.Generator, r: tuple[int, int]) -> int:
+    """An integer uniform over the inclusive range ``r``."""
+    return int(rng.integers(r[0], r[1] + 1))
 
 
 def _scaled(
