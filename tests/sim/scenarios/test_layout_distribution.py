@@ -276,3 +276,26 @@ def test_kept_counts_follow_their_ranges_where_a_plain_draw_skews_them(monkeypat
 class _Cfg:
     def __init__(self, layout: ElevatorLayout) -> None:
         self.layout = layout
+
+
+def test_kept_counts_queue_three_boarders_from_beyond_the_lobby(clean_registry):
+    """With ``keep_counts`` three boarders queue from QUEUE_BEYOND beyond the lobby's open far
+    side (as the three-boarders example does), so a 3 m lobby holds three 0.45 m boarders;
+    the plain draw keeps the paper world's scaled rows, which do not."""
+    from pioneer.sim.scenarios import distribution
+
+    dist = LayoutDistribution(
+        lobby_depth=(3.0, 3.0), n_boarding=(3, 3), n_exiting=(1, 1), human_radius=(0.45, 0.45)
+    )
+    kept = dataclasses.replace(dist, keep_counts=True)
+    rng = np.random.default_rng(1)
+    layout, _ = sample_layout(kept, rng, distribution.draw_counts(kept, rng))
+    front = round(distribution.QUEUE_FRONT_Y * 3.0 / ElevatorLayout().lobby_depth, 3)
+    assert layout.boarder_y == (-(3.0 + distribution.QUEUE_BEYOND), front)
+    plain, _ = sample_layout(dist, np.random.default_rng(1))
+    assert plain.boarder_y is not None and plain.boarder_y[0] > -3.0
+    variants, _ = sample_variants(kept, 2, seed=0, prefix="shallow3")
+    for entry in variants.values():
+        assert entry["elevator"]["n_boarding"] == 3 and entry["elevator"]["lobby_depth"] == 3.0
+    with pytest.raises(ScenarioError):
+        sample_variants(dist, 1, seed=0, prefix="shallow3")

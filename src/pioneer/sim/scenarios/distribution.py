@@ -54,6 +54,7 @@ MAX_LAYOUTS = 100_000  # layouts one call may draw (a scenario file of ≈ 20 MB
 # while layouts of 0.2–0.3 % passed the 50 seeds and then stopped a DAgger run in the middle.
 MIN_PLACEMENT_RATE = 0.02
 QUEUE_FRONT_Y = -2.7  # [m] the front of the boarders' start rows when three or more queue
+QUEUE_BEYOND = 0.4  # [m] keep_counts: how far beyond the lobby's open far side they may queue
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,9 +83,10 @@ class LayoutDistribution(Config):
     sides: Annotated[tuple[HumanSide, ...], MinLen(1)] = ("right", "left")
     # draw the numbers of boarders and exiting passengers once per layout and redraw only
     # the rest until its bodies are placed, so the numbers follow their ranges (two or more
-    # exiting passengers then start anywhere in the cabin's depth, as three boarders queue
-    # in the lobby's whole back); off, the whole draw is redrawn, and crowded numbers,
-    # placed less often, come out rarer than their ranges say (two passengers hardly ever)
+    # exiting passengers then start anywhere in the cabin's depth, and three or more boarders
+    # queue from QUEUE_BEYOND beyond the lobby's open far side); off, the whole draw is
+    # redrawn, and crowded numbers, placed less often, come out rarer than their ranges say
+    # (two passengers hardly ever)
     keep_counts: bool = False
 
 
@@ -112,7 +114,10 @@ def sample_layout(
     scale = u(dist.v_pref_scale)
     boarder_y = _scaled(PAPER.boarder_y, sd)
     if n_boarding >= 3:  # they queue in depth: give them the whole back of the lobby
-        boarder_y = (boarder_y[0], round(QUEUE_FRONT_Y * sd, 3))
+        # keep_counts: from QUEUE_BEYOND beyond its open far side, as the compact rule and
+        # the three-boarders example do (else three 0.45 m bodies fit only in deep lobbies)
+        back = -(d + QUEUE_BEYOND) if counts is not None else boarder_y[0]
+        boarder_y = (round(back, 3), round(QUEUE_FRONT_Y * sd, 3))
     exit_turn = _scaled(PAPER.exit_waypoints[0] if PAPER.exit_waypoints else None, sw, sd)
     layout = ElevatorLayout(
         human_side=cast(HumanSide, str(rng.choice(list(dist.sides)))),
