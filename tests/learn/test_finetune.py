@@ -420,6 +420,14 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     assert load_student(out / "student.safetensors").config == load_student(src).config
     info = read_checkpoint_meta(out / "student.safetensors")["info"]
     assert info["dagger"] == {"seed": 7} and info["finetune"]["updates"] == 2  # both records
+    # fine-tuned again: the first fine-tuning's record is kept beside the second's
+    again = tmp_path / "again"
+    proc = run_cli("finetune", "--out", str(again), "--student", str(out / "student.safetensors"),
+                   "--scenario", "hr-rl", "--critic-warmup", "0", *args[:8])  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    info2 = read_checkpoint_meta(again / "student.safetensors")["info"]
+    assert info2["dagger"] == {"seed": 7} and info2["finetune_earlier"] == [info["finetune"]]
+    assert info2["finetune"]["settings"]["scenarios"] == [["hr-rl"]]  # one pool
 
 
 def test_prioritised_layouts_are_drawn_by_their_failure_rate(tmp_path: Path) -> None:

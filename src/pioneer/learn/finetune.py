@@ -123,7 +123,8 @@ __all__ = ["CURVE_COLUMNS", "FINETUNE_REWARD", "FinetuneConfig", "finetune_stude
 # ------------------------------------------------------------------------------ the run
 def _write_outputs(tr: FinetuneTrainer, out: Path, info: dict[str, Any], final: bool) -> None:
     tr.save(out / "checkpoint.safetensors", info["settings"])
-    # the DAgger student's own record (its recipe, scenario, losses) stays, beside this run's
+    # the DAgger student's own record (its recipe, scenario, losses, earlier fine-tunings)
+    # stays, beside this run's
     save_student(tr.actor, out / "student.safetensors", {**tr.start_info, "finetune": info})
     write_text_atomic(out / "curve.csv", curve_csv(CURVE_COLUMNS, tr.curve))
     if final:
@@ -202,7 +203,7 @@ def finetune_student(
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
     tr = FinetuneTrainer(start, names, cfg, mastery_teacher)
-    tr.start_info = {k: v for k, v in read_checkpoint_meta(src)["info"].items() if k != "finetune"}
+    tr.start_info = _start_info(read_checkpoint_meta(src)["info"])
     settings = tr.settings(file_sha256(src))
     with run_lock(out):
         check_resume(resume, ckpt, out)  # again, holding the lock
@@ -319,3 +320,14 @@ def _obs_dim(name: str) -> int:
     from pioneer.sim.scenarios import get_scenario
 
     return int(get_scenario(name).sim.lidar.obs_dim)
+
+
+def _start_info(info: dict[str, Any]) -> dict[str, Any]:
+    """The starting student's record, carried into the fine-tuned one; a student fine-tuned
+    before keeps its earlier fine-tunings, oldest first, under ``finetune_earlier``."""
+    out = {k: v for k, v in info.items() if k not in ("finetune", "finetune_earlier")}
+    earlier = [
+        *info.get("finetune_earlier", []),
+        *([info["finetune"]] if "finetune" in info else []),
+    ]
+    return out | ({"finetune_earlier": earlier} if earlier else {})
