@@ -125,7 +125,8 @@ class Finetune:
     out: OutDir
     """output folder (student, checkpoint, curve)"""
     student: Annotated[str, metavar("FILE"), Input("file")]
-    """the DAgger student to start from (.safetensors)"""
+    """the student to start from (.safetensors): a DAgger student, or a fine-tuned one to
+    fine-tune again"""
     scenario: Annotated[tuple[str, ...], metavar("NAME")] = ("general-*", "hr-rl", "hl-rr")
     """scenarios or patterns (general-*: the layouts of `pioneer --scenarios FILE`), each drawn
     equally often (the default: student-general's)"""
