@@ -352,6 +352,12 @@ def test_read_records_drops_a_torn_line_and_keeps_the_file_line_aligned(tmp_path
     path.write_text('{"scen')
     assert read_records(path) == []
     assert path.read_text() == ""
+    # the whole lines are kept byte for byte (cut at the last newline, never rewritten), also
+    # behind a torn tail longer than one read
+    whole = (json.dumps(good, indent=None, separators=(",", ":")) + "\n").encode()
+    path.write_bytes(whole + b'{"scenario": "' + b"x" * 70_000)
+    assert read_records(path) == [good]
+    assert path.read_bytes() == whole
     assert read_records(tmp_path / "missing.jsonl") == []
 
 

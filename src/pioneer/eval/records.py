@@ -208,16 +208,31 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
     on stderr, since its episode will simply be run again.
     """
     p = Path(path)
-    records, whole, duplicates = parse_records(p)
+    records, _, duplicates = parse_records(p)
     warn_duplicates(p, duplicates)
     if _torn(p):
         print(
             f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
             file=sys.stderr,
         )
-        with open(p, "w") as fh:  # drop the partial tail so appends stay line-aligned
-            fh.write("".join(line + "\n" for line in whole))
+        # drop the partial tail so appends stay line-aligned: one truncation at the last
+        # newline, so no whole line is ever rewritten (or lost if this process is killed)
+        os.truncate(p, _whole_lines_size(p))
     return records
+
+
+def _whole_lines_size(p: Path) -> int:
+    """The byte length of ``p`` up to and including its last newline."""
+    with open(p, "rb") as fh:
+        end = fh.seek(0, os.SEEK_END)
+        while end > 0:
+            start = max(0, end - 65536)
+            fh.seek(start)
+            at = fh.read(end - start).rfind(b"\n")
+            if at >= 0:
+                return start + at + 1
+            end = start
+    return 0
 
 
 def _torn(p: Path) -> bool:
