@@ -210,41 +210,33 @@ def read_records(path: str | Path) -> list[dict[str, Any]]:
     p = Path(path)
     records, _, duplicates = parse_records(p)
     warn_duplicates(p, duplicates)
-    if _torn(p):
+    keep, size = _line_aligned_size(p)
+    if keep < size:
         print(
             f"pioneer: warning: {p}: ignoring an unfinished last line (re-running it)",
             file=sys.stderr,
         )
         # drop the partial tail so appends stay line-aligned: one truncation at the last
         # newline, so no whole line is ever rewritten (or lost if this process is killed)
-        os.truncate(p, _whole_lines_size(p))
+        os.truncate(p, keep)
     return records
 
 
-def _whole_lines_size(p: Path) -> int:
-    """The byte length of ``p`` up to and including its last newline."""
+def _line_aligned_size(p: Path) -> tuple[int, int]:
+    """``(bytes up to and including the last newline, all bytes)`` of ``p`` (0, 0 if it does
+    not exist); the two differ when the last line is unfinished."""
+    if not p.exists():
+        return 0, 0
     with open(p, "rb") as fh:
-        end = fh.seek(0, os.SEEK_END)
+        size = end = fh.seek(0, os.SEEK_END)
         while end > 0:
             start = max(0, end - 65536)
             fh.seek(start)
             at = fh.read(end - start).rfind(b"\n")
             if at >= 0:
-                return start + at + 1
+                return start + at + 1, size
             end = start
-    return 0
-
-
-def _torn(p: Path) -> bool:
-    """Whether the file ends in a line without its newline."""
-    if not p.exists():
-        return False
-    with open(p, "rb") as fh:
-        fh.seek(0, os.SEEK_END)
-        if fh.tell() == 0:
-            return False
-        fh.seek(-1, os.SEEK_END)
-        return fh.read(1) != b"\n"
+    return 0, size
 
 
 def append_record(fh: Any, rec: dict[str, Any]) -> None:
