@@ -225,6 +225,8 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
             "mastery_window": 2,
             "teacher": {"hr-rl": 1.0, "hl-rr": 0.95},
         },
+        # drawn by situation (one here: both worlds hold two boarders and one passenger)
+        {"stratify": True, "replay": 0.5, "replay_mode": "mastery", "mastery_layouts": 1},
     ],
     ids=[
         "prioritised",
@@ -234,6 +236,7 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         "risk-sensitive",
         "mastery",
         "regret",
+        "stratified",
     ],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:

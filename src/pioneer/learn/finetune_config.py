@@ -47,6 +47,10 @@ class FinetuneConfig(Config):
     # the rest among those not yet seen (prioritised level replay); "mastery": the replayed
     # share practises a few hard layouts, each until it is mastered (pioneer.learn.curriculum)
     replay_mode: ReplayMode = "mix"
+    # draw each pattern's layouts by situation (people boarding, leaving, a shallow lobby):
+    # its situations equally often, then a layout of one uniformly (pioneer.learn.situations);
+    # the curriculum then chooses among situations. False: a pattern's layouts uniformly
+    stratify: bool = False
     mastery_layouts: Count = 9  # "mastery": layouts practised at once
     # "mastery": the share of a layout's last ``mastery_window`` episodes that must succeed
     mastery: UnitInterval = 0.9

@@ -22,6 +22,7 @@ from pioneer.learn.curriculum import Curriculum
 from pioneer.learn.finetune_config import FINETUNE_REWARD, FinetuneConfig
 from pioneer.learn.layout_env import LayoutEnvs, privileged_width
 from pioneer.learn.models import Student
+from pioneer.learn.situations import by_situation
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
 from pioneer.nn.critic import Critic, lower_tail_mean, value_loss
 from pioneer.nn.ppo import (
@@ -76,6 +77,9 @@ class FinetuneTrainer:
         ceiling: Mapping[str, float] | None = None,
     ) -> None:
         self.cfg, self.names = cfg, [list(n) for n in names]
+        weights: list[float] | None = None
+        if cfg.stratify:  # the patterns split by situation (pioneer.learn.situations)
+            self.names, weights = by_situation(self.names)
         self.ceiling = None if ceiling is None else dict(ceiling)  # the curriculum's (regret)
         self.start_info: dict[str, Any] = {}  # the starting student's checkpoint info
         self.actor = start.eval()
@@ -102,7 +106,7 @@ class FinetuneTrainer:
         self.gen = torch.Generator().manual_seed(cfg.seed + 1)
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0xF17E]))
         self.envs = LayoutEnvs(
-            names,
+            self.names,
             cfg.groups,
             cfg.group_size,
             start.config.inputs,
@@ -113,6 +117,7 @@ class FinetuneTrainer:
             cfg.replay,
             cfg.replay_mode,
             self._curriculum(),
+            weights,
         )
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0

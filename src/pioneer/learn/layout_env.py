@@ -106,8 +106,9 @@ class _Group:
 
 class LayoutEnvs:
     """``groups`` × ``group_size`` copies over the layouts ``names`` (module docstring): a
-    sequence of name sets, each drawn equally often, a layout uniformly within its set (e.g.
-    ``[["general-0000", …], ["hr-rl"], ["hl-rr"]]``: a third each).
+    sequence of name sets, each drawn equally often (or with the probabilities ``weights``), a
+    layout uniformly within its set (e.g. ``[["general-0000", …], ["hr-rl"], ["hl-rr"]]``: a
+    third each).
 
     ``rng`` draws the layouts and the episodes' seed numbers (its state is the caller's to
     save); ``seed`` is the run's, mixed into every episode's training seed.
@@ -126,8 +127,12 @@ class LayoutEnvs:
         replay: float = 0.0,
         replay_mode: ReplayMode = "mix",
         curriculum: Curriculum | None = None,
+        weights: Sequence[float] | None = None,
     ) -> None:
         self.names = [list(n) for n in names]
+        if weights is not None and (len(weights) != len(names) or abs(sum(weights) - 1) > 1e-9):
+            raise ValueError(f"weights: one per name set, summing to 1; got {list(weights)}")
+        self.weights = None if weights is None else np.asarray(weights, dtype=np.float64)
         self.size, self.inputs, self.reward = group_size, inputs, reward
         self.rng, self.seed, self.max_humans = rng, seed, max_humans
         self.episode_count = 0  # episodes started: the k of finetune_seed
@@ -169,7 +174,9 @@ class LayoutEnvs:
         if cur is not None and cur.active and self.rng.random() < self.replay:
             name = cur.draw(self.rng)
         else:
-            pool = self.names[int(self.rng.integers(len(self.names)))]
+            k = len(self.names)
+            i = self.rng.integers(k) if self.weights is None else self.rng.choice(k, p=self.weights)
+            pool = self.names[int(i)]
             name = pool[self._draw(pool)]
         sc = get_scenario(name)
         state = State.concat([self._episode(sc) for _ in range(self.size)])
