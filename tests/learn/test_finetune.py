@@ -227,6 +227,7 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         },
         # drawn by situation (one here: both worlds hold two boarders and one passenger)
         {"stratify": True, "replay": 0.5, "replay_mode": "mastery", "mastery_layouts": 1},
+        {"average_horizon": 3 * 2 * 2 * 8},  # the actor's weights averaged: the average saved
     ],
     ids=[
         "prioritised",
@@ -237,6 +238,7 @@ def test_the_multiplier_rises_while_collisions_exceed_the_limit(tmp_path: Path) 
         "mastery",
         "regret",
         "stratified",
+        "averaged",
     ],
 )
 def test_a_resumed_run_equals_an_uninterrupted_one(tmp_path: Path, change: dict[str, Any]) -> None:
@@ -434,6 +436,36 @@ def test_the_command_fine_tunes_and_writes_its_outputs(tmp_path: Path) -> None:
     info2 = read_checkpoint_meta(again / "student.safetensors")["info"]
     assert info2["dagger"] == {"seed": 7} and info2["finetune_earlier"] == [info["finetune"]]
     assert info2["finetune"]["settings"]["scenarios"] == [["hr-rl"]]  # one pool
+
+
+def test_the_weights_average_follows_every_update_and_leaves_training_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    src = _student(tmp_path)
+    plain = finetune_student(src, ["h?-r?"], tmp_path / "plain", TINY, progress=False)
+    horizon = 3 * TINY.steps_per_update  # each update moves the average a third of the way
+    iterates: list[dict[str, torch.Tensor]] = []
+    end_update = FinetuneTrainer.end_update
+
+    def recording(tr: FinetuneTrainer) -> list[float]:
+        iterates.append({k: v.detach().clone() for k, v in tr.actor.named_parameters()})
+        return end_update(tr)
+
+    monkeypatch.setattr(FinetuneTrainer, "end_update", recording)
+    cfg = dataclasses.replace(TINY, average_horizon=horizon)
+    averaged = finetune_student(src, ["h?-r?"], tmp_path / "avg", cfg, progress=False)
+    assert averaged["updates"] == plain["updates"] == len(iterates) == 4
+    last = load_file(tmp_path / "avg" / "student-last.safetensors")  # training is unchanged
+    same = load_file(tmp_path / "plain" / "student.safetensors")
+    assert last.keys() == same.keys() and all(torch.equal(last[k], same[k]) for k in last)
+    # brute force: θ̄_0 the starting student's weights, θ̄_k = θ̄_{k−1} + (θ_k − θ̄_{k−1}) / 3
+    mean = dict(load_student(src).named_parameters())
+    for theta in iterates:
+        mean = {k: mean[k] + (theta[k] - mean[k]) / 3 for k in mean}
+    got = dict(load_student(tmp_path / "avg" / "student.safetensors").named_parameters())
+    for k, v in mean.items():
+        torch.testing.assert_close(got[k], v.detach(), rtol=1e-6, atol=1e-7)  # lerp's rounding
+    assert any(not torch.equal(got[k], iterates[-1][k]) for k in mean)  # not the last iterate
 
 
 def test_prioritised_layouts_are_drawn_by_their_failure_rate(tmp_path: Path) -> None:

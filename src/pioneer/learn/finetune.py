@@ -125,7 +125,12 @@ def _write_outputs(tr: FinetuneTrainer, out: Path, info: dict[str, Any], final: 
     tr.save(out / "checkpoint.safetensors", info["settings"])
     # the DAgger student's own record (its recipe, scenario, losses, earlier fine-tunings)
     # stays, beside this run's
-    save_student(tr.actor, out / "student.safetensors", {**tr.start_info, "finetune": info})
+    record = {**tr.start_info, "finetune": info}
+    if tr.average is not None:  # the average is the product; the last iterate beside it
+        save_student(tr.actor, out / "student-last.safetensors", record)
+        save_student(tr.average, out / "student.safetensors", record)
+    else:
+        save_student(tr.actor, out / "student.safetensors", record)
     write_text_atomic(out / "curve.csv", curve_csv(CURVE_COLUMNS, tr.curve))
     if final:
         from pioneer.viz.plots import plot_learning_curve

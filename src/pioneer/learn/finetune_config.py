@@ -76,6 +76,11 @@ class FinetuneConfig(Config):
     risk_alpha: Annotated[float, Interval(gt=0.0, le=1.0)] = 1.0
     quantiles: Annotated[int, Interval(ge=2)] = 32  # N of the critic's quantiles (α < 1)
     reward: CrowdNavRewardConfig = FINETUNE_REWARD
+    # [env steps] the time constant of an exponential moving average of the actor's weights,
+    # updated after every update (Polyak averaging; stochastic weight averaging in RL, Nikishin
+    # et al. 2018): student.safetensors is then the average, student-last.safetensors the last
+    # iterate; 0: off
+    average_horizon: NonNegativeInt = 0
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
     checkpoint_every: Count = 20  # [updates] between checkpoints
     window: Count = 200  # finished episodes in the curve's running statistics

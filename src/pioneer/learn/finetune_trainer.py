@@ -119,6 +119,8 @@ class FinetuneTrainer:
             self._curriculum(),
             weights,
         )
+        # the moving average of the actor's weights (``average_horizon``), else None
+        self.average = copy.deepcopy(start).requires_grad_(False) if self.averaging else None
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0
         self.wall = 0.0
@@ -351,10 +353,22 @@ class FinetuneTrainer:
         opt.step()
         return float(loss.detach())
 
+    @property
+    def averaging(self) -> bool:
+        """Whether the actor's weights are averaged (``average_horizon`` > 0)."""
+        return self.cfg.average_horizon > 0
+
     def end_update(self) -> list[float]:
-        """Count the update, redraw the layouts when due, move λ (when constrained), append
-        the curve's row."""
+        """Count the update, move the weights' average (when averaging), redraw the layouts
+        when due, move λ (when constrained), append the curve's row."""
         self.update += 1
+        if self.average is not None:  # θ̄ ← θ̄ + (θ − θ̄) · steps per update / horizon
+            rate = min(1.0, self.cfg.steps_per_update / self.cfg.average_horizon)
+            with torch.no_grad():
+                for mean, now in zip(
+                    self.average.parameters(), self.actor.parameters(), strict=True
+                ):
+                    mean.lerp_(now, rate)
         if self.update % self.cfg.layout_period == 0:
             for g in range(self.cfg.groups):
                 self.envs.redraw(g)
@@ -401,6 +415,8 @@ class FinetuneTrainer:
         tensors["log_std"] = self.log_std.detach().clone()
         tensors["lagrange"] = torch.tensor([self.lagrange], dtype=torch.float64)
         modules = {"actor": self.actor, "ref": self.ref, "critic": self.critic}
+        if self.average is not None:
+            modules["average"] = self.average
         optimizers = {"optim": self.opt, "critic_optim": self.critic_opt}
         if self.cost_critic is not None and self.cost_opt is not None:
             modules["cost_critic"] = self.cost_critic
@@ -443,6 +459,8 @@ class FinetuneTrainer:
         ]
         if self.cost_critic is not None:
             modules.append(("cost_critic", self.cost_critic))
+        if self.average is not None:
+            modules.append(("average", self.average))
         for prefix, module in modules:
             sd = {k[len(prefix) + 1 :]: v for k, v in t.items() if k.startswith(prefix + "/")}
             module.load_state_dict(sd, strict=True)
