@@ -345,6 +345,7 @@ def test_the_guidance_weighs_each_label_by_the_dagger_students_distance(tmp_path
 def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Path) -> None:
     src = _student(tmp_path)
     (tmp_path / "student.safetensors").write_bytes(src.read_bytes())  # a run's own output
+    (tmp_path / "student-last.safetensors").write_bytes(src.read_bytes())  # an averaged run's
     before = file_tree(tmp_path)
     missing = run_cli("finetune", "--out", str(tmp_path / "run"), "--student",
                       str(tmp_path / "none.safetensors"), "--scenario", "hr-rl")  # fmt: skip
@@ -352,6 +353,9 @@ def test_the_command_refuses_bad_input_in_one_line_leaving_no_trace(tmp_path: Pa
     onto = run_cli("finetune", "--out", str(tmp_path), "--student", str(tmp_path /
                    "student.safetensors"), "--scenario", "hr-rl")  # fmt: skip
     one_error_line(onto.stderr, onto.returncode, "input")
+    last = run_cli("finetune", "--out", str(tmp_path), "--student", str(tmp_path /
+                   "student-last.safetensors"), "--scenario", "hr-rl")  # fmt: skip
+    one_error_line(last.stderr, last.returncode, "input")
     unknown = run_cli("finetune", "--out", str(tmp_path / "run"), "--student", str(src),
                       "--scenario", "no-such-world")  # fmt: skip
     one_error_line(unknown.stderr, unknown.returncode, "no-such-world")

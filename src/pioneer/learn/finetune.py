@@ -156,8 +156,8 @@ def finetune_student(
     mastery_teacher: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """Fine-tune (or resume) the student at ``student`` over ``scenarios`` (names or patterns
-    such as ``general-*``; each entry drawn equally often, a pattern's matches uniformly);
-    returns the summary written to ``train.json``.
+    such as ``general-*``; each entry drawn equally often, a pattern's matches uniformly or,
+    with ``stratify``, by situation); returns the summary written to ``train.json``.
 
     ``resume``: ``None`` continues from ``out/checkpoint.safetensors`` if there is one,
     ``True`` requires it, ``False`` refuses it. ``mastery_teacher``: a reference policy's
@@ -202,7 +202,8 @@ def finetune_student(
                     )
                 ) from None
     out = output_dir_kind(out_dir)
-    check_not_input(out / "student.safetensors", [src])
+    for written in ("student.safetensors", "student-last.safetensors"):
+        check_not_input(out / written, [src])
     ckpt = out / "checkpoint.safetensors"
     check_resume(resume, ckpt, out)
     if torch_threads is not None:

@@ -3,14 +3,13 @@
 
 A family of sampled layouts is drawn uniformly by default, so a situation is practised as
 often as the sampler happens to produce it: crowded numbers of people and shallow lobbies are
-placed less often and come out rare, and a student practising the mix forgets them. Here each
-pattern's layouts are split by *situation* — the number of people boarding, the number
-leaving the cabin, and whether the lobby is shallow (the map reaches less than
-:data:`SHALLOW_LOBBY` below the door) — and a pattern's draws go to its situations equally,
-then to a layout of the situation uniformly. Situations with fewer than :data:`MIN_LAYOUTS`
-layouts are pooled into one (or, fewer than that together, join the largest situation), so no
-single layout takes a situation's whole share. The
-patterns keep their shares (each still drawn equally often), and the mastery curriculum
+placed less often and come out rare. Here each pattern's layouts are split by *situation* —
+the number of people boarding, the number leaving the cabin, and whether the lobby is shallow
+(the map reaches less than :data:`SHALLOW_LOBBY` below the door) — and a pattern's draws go
+to its situations equally, then to a layout of the situation uniformly. Situations with fewer
+than :data:`MIN_LAYOUTS` layouts are pooled into one (or, fewer than that together, join the
+largest situation), so no single layout takes a situation's whole share. The patterns keep
+their shares (each still drawn equally often), and the mastery curriculum
 (:mod:`pioneer.learn.curriculum`) chooses among the situations instead of the families.
 """
 
