@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import collections
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,10 +17,12 @@ from pioneer.learn.finetune import FINETUNE_REWARD
 from pioneer.learn.layout_env import LayoutEnvs
 from pioneer.learn.models import StudentConfig, build_student
 from pioneer.learn.situations import MIN_LAYOUTS, by_situation, situation
-from pioneer.sim.scenarios import ElevatorLayout, elevator_scenario, register_scenario
+from pioneer.sim.scenarios import ElevatorLayout, elevator_scenario
 
 
-def test_a_situation_counts_the_people_by_role_and_flags_a_shallow_lobby() -> None:
+def test_a_situation_counts_the_people_by_role_and_flags_a_shallow_lobby(
+    scenario_registry: Any,  # the registration leaves no trace for other tests
+) -> None:
     assert situation("hr-rl") == situation("hl-rr") == (2, 1, False)  # the paper's 4 m lobby
     assert situation("hr-rl-compact") == (2, 1, True)  # its 1.3 m lobby
     assert situation("static")[:2] == (0, 0)
@@ -28,7 +31,7 @@ def test_a_situation_counts_the_people_by_role_and_flags_a_shallow_lobby() -> No
         robot_start_y=(-2.0, -1.7), boarder_x=(1.5, 1.6), boarder_y=(-3.7, -2.25),
         exit_start_y=(0.6, 2.3), exit_waypoints=((1.5, -1.3),),
     )  # fmt: skip
-    register_scenario("situation-test-crowded", lambda: elevator_scenario(lay, name="x"))
+    scenario_registry.register_scenario("situation-test-crowded", lambda: elevator_scenario(lay))
     assert situation("situation-test-crowded") == (3, 2, True)
 
 
