@@ -120,7 +120,8 @@ class FinetuneTrainer:
             weights,
         )
         # the moving average of the actor's weights (``average_horizon``), else None
-        self.average = copy.deepcopy(start).requires_grad_(False) if self.averaging else None
+        averaging = cfg.average_horizon > 0
+        self.average = copy.deepcopy(start).requires_grad_(False) if averaging else None
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0
         self.wall = 0.0
@@ -352,11 +353,6 @@ class FinetuneTrainer:
         nn.utils.clip_grad_norm_(critic.parameters(), self.cfg.max_grad_norm)
         opt.step()
         return float(loss.detach())
-
-    @property
-    def averaging(self) -> bool:
-        """Whether the actor's weights are averaged (``average_horizon`` > 0)."""
-        return self.cfg.average_horizon > 0
 
     def end_update(self) -> list[float]:
         """Count the update, move the weights' average (when averaging), redraw the layouts
