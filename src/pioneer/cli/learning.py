@@ -136,6 +136,9 @@ class Finetune:
     """with --replay-mode mastery: `pioneer eval --seed-set validation` folders of the teacher
     on every layout of the patterns; the curriculum then practises only layouts the teacher
     masters, by how far the student falls below it (regret)"""
+    rehearse: Annotated[tuple[str, ...], metavar("NAME")] = ()
+    """scenarios or patterns not practised but kept: a pull (--rehearse-coef) towards the
+    starting student on its own states there (a later stage keeps what an earlier one learned)"""
     threads: Annotated[int, Ge(1)] = default(finetune_student, "torch_threads")
     """torch's intra-op threads (2 on an otherwise idle 2-core machine: ≈ 1.3× faster)"""
     resume: Flag = False
@@ -157,6 +160,7 @@ class Finetune:
             command=command_line(),
             torch_threads=self.threads,
             mastery_teacher=table,
+            rehearse=self.rehearse,
         )
         student = f"{self.out}/student.safetensors"
         print(to_json({"student": student, "updates": summary["updates"]}))

@@ -64,6 +64,11 @@ PPO
     with σ) and the critic (``critic_lr``). The environments are
     :class:`~pioneer.learn.layout_env.LayoutEnvs`: ``groups`` layouts × ``group_size`` copies;
     every ``layout_period`` updates every group draws a new layout.
+Rehearsal (optional; ``--rehearse PATTERN …``)
+    Layouts the stage does not practise, kept by a constant pull towards the starting student
+    on its own states there, β_R · ½ ‖(μ(x) − μ_0(x)) / (s_u σ_0)‖² (β_R = ``rehearse_coef``;
+    :mod:`pioneer.learn.rehearsal`): a stage over new families does not give back what an
+    earlier stage mastered, and spends none of its env steps on it.
 Layouts practised to mastery (optional; ``replay_mode = "mastery"``)
     A share ``replay`` of the draws practises a small set of hard layouts, each kept until the
     student masters it (``mastery`` of its last ``mastery_window`` episodes succeed) and then
@@ -154,6 +159,7 @@ def finetune_student(
     torch_threads: int | None = 1,
     on_update: Callable[[dict[str, float]], None] | None = None,
     mastery_teacher: Mapping[str, float] | None = None,
+    rehearse: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fine-tune (or resume) the student at ``student`` over ``scenarios`` (names or patterns
     such as ``general-*``; each entry drawn equally often, a pattern's matches uniformly or,
@@ -163,6 +169,8 @@ def finetune_student(
     ``True`` requires it, ``False`` refuses it. ``mastery_teacher``: a reference policy's
     success (0–1) on every layout of the patterns with more than one (``replay_mode =
     "mastery"`` only; the curriculum then follows regret, :mod:`pioneer.learn.curriculum`).
+    ``rehearse``: names or patterns of layouts rehearsed, not practised
+    (:mod:`pioneer.learn.rehearsal`).
     Every input is checked before ``out`` is created; one run writes to ``out`` at a time
     (:func:`pioneer.io.run_lock`).
     """
@@ -172,10 +180,11 @@ def finetune_student(
     if not scenarios:
         raise ConfigError(expect("--scenario", "one or more scenarios", "none", "name one"))
     names = [scenario_set(pattern) for pattern in scenarios]
+    rehearsed = [scenario_set(pattern) for pattern in rehearse]
     _check_curriculum(cfg, scenarios, names, mastery_teacher)
     src = Path(student)
     start = load_student(src)
-    obs_dims = {_obs_dim(n) for pool in names for n in pool}
+    obs_dims = {_obs_dim(n) for pool in [*names, *rehearsed] for n in pool}
     if obs_dims != {start.config.obs_dim}:
         raise DataError(
             expect(
@@ -208,7 +217,7 @@ def finetune_student(
     check_resume(resume, ckpt, out)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
-    tr = FinetuneTrainer(start, names, cfg, mastery_teacher)
+    tr = FinetuneTrainer(start, names, cfg, mastery_teacher, rehearsed, progress)
     tr.start_info = _start_info(read_checkpoint_meta(src)["info"])
     settings = tr.settings(file_sha256(src))
     with run_lock(out):

@@ -81,6 +81,11 @@ class FinetuneConfig(Config):
     # et al. 2018): student.safetensors is then the average, student-last.safetensors the last
     # iterate; 0: off
     average_horizon: NonNegativeInt = 0
+    # rehearsal of layouts the stage does not practise (``--rehearse``;
+    # pioneer.learn.rehearsal): β_R of the pull towards the starting student on its own states
+    # there (constant), and how many of those states are kept
+    rehearse_coef: NonNegative = 1.0
+    rehearse_states: Count = 65_536
     seed: NonNegativeInt = 0  # seeds the critic, the noise, the minibatches and the episodes
     checkpoint_every: Count = 20  # [updates] between checkpoints
     window: Count = 200  # finished episodes in the curve's running statistics

@@ -22,6 +22,7 @@ from pioneer.learn.curriculum import Curriculum
 from pioneer.learn.finetune_config import FINETUNE_REWARD, FinetuneConfig
 from pioneer.learn.layout_env import LayoutEnvs, privileged_width
 from pioneer.learn.models import Student
+from pioneer.learn.rehearsal import Rehearsal
 from pioneer.learn.situations import by_situation
 from pioneer.nn.checkpoint import read_training_state, restore_optimizer, write_training_state
 from pioneer.nn.critic import Critic, lower_tail_mean, value_loss
@@ -75,8 +76,11 @@ class FinetuneTrainer:
         names: Sequence[Sequence[str]],
         cfg: FinetuneConfig,
         ceiling: Mapping[str, float] | None = None,
+        rehearse: Sequence[Sequence[str]] = (),
+        progress: bool = False,
     ) -> None:
         self.cfg, self.names = cfg, [list(n) for n in names]
+        self.rehearse = [list(n) for n in rehearse]  # layouts rehearsed (pioneer.learn.rehearsal)
         weights: list[float] | None = None
         if cfg.stratify:  # the patterns split by situation (pioneer.learn.situations)
             self.names, weights = by_situation(self.names)
@@ -122,6 +126,9 @@ class FinetuneTrainer:
         # the moving average of the actor's weights (``average_horizon``), else None
         averaging = cfg.average_horizon > 0
         self.average = copy.deepcopy(start).requires_grad_(False) if averaging else None
+        self.rehearsal = None
+        if self.rehearse:  # the starting student's own states there, drawn before training
+            self.rehearsal = Rehearsal.collect(start, self.rehearse, cfg, MAX_HUMANS, progress)
         self.ep_return = np.zeros(cfg.envs)
         self.update = self.env_steps = self.episodes = 0
         self.wall = 0.0
@@ -295,6 +302,8 @@ class FinetuneTrainer:
         stats = {"policy_loss": 0.0, "value_loss": 0.0, "pull": 0.0}
         if self.guided:
             stats["imitation"] = 0.0
+        if self.rehearsal is not None:
+            stats["rehearsal"] = 0.0
         steps = 0
         scale = self.actor.act_std * cfg.init_std
         for _ in range(cfg.epochs):
@@ -320,6 +329,10 @@ class FinetuneTrainer:
                     imitation = self._imitation(mean, batch, idx, scale)
                     loss = loss + cfg.teacher_coef * imitation
                     stats["imitation"] += float(imitation.detach())
+                if self.rehearsal is not None:
+                    kept = self.rehearsal.loss(self.actor, len(idx), scale, self.gen)
+                    loss = loss + cfg.rehearse_coef * kept
+                    stats["rehearsal"] += float(kept.detach())
                 self.opt.zero_grad(set_to_none=True)
                 loss.backward()
                 nn.utils.clip_grad_norm_(
@@ -397,6 +410,8 @@ class FinetuneTrainer:
         """What must match between a checkpoint and a resuming command."""
         cfg = {k: v for k, v in self.cfg.to_dict().items() if k not in _NOT_SETTINGS}
         out = {"finetune": cfg, "student_sha256": student_sha256, "scenarios": self.names}
+        if self.rehearse:
+            out["rehearse"] = self.rehearse
         if self.ceiling is not None:  # the curriculum's reference success per layout
             table = json.dumps(sorted(self.ceiling.items())).encode()
             out["mastery_teacher_sha256"] = hashlib.sha256(table).hexdigest()
@@ -439,7 +454,8 @@ class FinetuneTrainer:
         meta, t = read_training_state(path, TRAIN_FORMAT, fix)
         stored = _with_new_defaults(json.loads(meta["settings"]))
         if stored != json.loads(json.dumps(settings)):
-            diff = sorted(k for k in set(stored) | set(settings) if stored.get(k) != settings[k])
+            keys = set(stored) | set(settings)
+            diff = sorted(k for k in keys if stored.get(k) != settings.get(k))
             raise ConfigError(
                 expect(
                     f"{path}: settings",
