@@ -16,17 +16,15 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save_file
 
+from finetune_testutils import TINY_FINETUNE, tiny_student
 from pioneer.control.teacher import make_teacher
 from pioneer.learn import finetune_trainer as trainer_module
-from pioneer.learn.finetune import FINETUNE_REWARD, FinetuneConfig, finetune_student
+from pioneer.learn.finetune import FINETUNE_REWARD, finetune_student
 from pioneer.learn.finetune_trainer import CURVE_COLUMNS, FinetuneTrainer
 from pioneer.learn.layout_env import HUMAN_FEATURES, ROBOT_FEATURES, LayoutEnvs, privileged
 from pioneer.learn.models import (
-    StudentConfig,
-    build_student,
     load_student,
     read_checkpoint_meta,
-    save_student,
 )
 from pioneer.nn.critic import lower_tail_mean
 from pioneer.nn.ppo import lagrangian_advantage
@@ -36,31 +34,11 @@ from pioneer.sim.scenarios import get_scenario, sample_state
 from pioneer.sim.world import State
 from pioneer_testutils import file_tree, one_error_line, run_cli
 
-TINY = FinetuneConfig(
-    total_steps=4 * 2 * 2 * 8,  # 4 updates
-    groups=2,
-    group_size=2,
-    rollout=8,
-    layout_period=2,
-    epochs=2,
-    minibatches=2,
-    critic_warmup=1,
-    critic_hidden=(16,),
-    kl_fade=2 * 2 * 2 * 8,  # 2 updates
-    checkpoint_every=1,
-)
+TINY = dataclasses.replace(TINY_FINETUNE, kl_fade=2 * 2 * 2 * 8)  # the pull: 2 updates
 
 
 def _student(tmp_path: Path, symmetric: bool = False) -> Path:
-    cfg = StudentConfig(
-        hidden=(16,), previous_observation=True, previous_command=True, symmetric=symmetric
-    )
-    model = build_student(cfg, seed=3)
-    gen = torch.Generator().manual_seed(0)
-    model.set_normalizer(
-        torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2, generator=gen)
-    )
-    return save_student(model, tmp_path / "start.safetensors", {"dagger": {"seed": 7}})
+    return tiny_student(tmp_path, seed=3, normalizer_seed=0, symmetric=symmetric)
 
 
 def test_privileged_matches_a_brute_force_frame_change() -> None:

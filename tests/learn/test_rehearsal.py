@@ -12,35 +12,18 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from pioneer.learn.finetune import FinetuneConfig, finetune_student
+from finetune_testutils import TINY_FINETUNE, tiny_student
+from pioneer.learn.finetune import finetune_student
 from pioneer.learn.finetune_trainer import MAX_HUMANS, FinetuneTrainer
-from pioneer.learn.models import StudentConfig, build_student, load_student, save_student
+from pioneer.learn.models import load_student
 from pioneer.learn.rehearsal import Rehearsal
 from pioneer_testutils import file_tree, one_error_line, run_cli
 
-TINY = FinetuneConfig(
-    total_steps=4 * 2 * 2 * 8,  # 4 updates
-    groups=2,
-    group_size=2,
-    rollout=8,
-    layout_period=2,
-    epochs=2,
-    minibatches=2,
-    critic_warmup=1,
-    critic_hidden=(16,),
-    checkpoint_every=1,
-    rehearse_states=40,  # rounded up to 10 steps of the 4 copies
-)
+TINY = dataclasses.replace(TINY_FINETUNE, rehearse_states=40)  # 10 steps of the 4 copies
 
 
 def _student(tmp_path: Path) -> Path:
-    cfg = StudentConfig(hidden=(16,), previous_observation=True, previous_command=True)
-    model = build_student(cfg, seed=5)
-    gen = torch.Generator().manual_seed(1)
-    model.set_normalizer(
-        torch.randn(64, cfg.input_dim, generator=gen), torch.rand(64, 2, generator=gen)
-    )
-    return save_student(model, tmp_path / "start.safetensors", {"dagger": {"seed": 7}})
+    return tiny_student(tmp_path, seed=5, normalizer_seed=1)
 
 
 def test_the_states_are_the_starting_students_own_and_drawn_again_identically(
