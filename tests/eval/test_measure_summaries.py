@@ -40,6 +40,7 @@ def _measures(**kw):
         "person_hit": None,
         "person_role": None,
         "person_index": None,
+        "blocked": None,
     }
     return {**base, **kw}
 
@@ -69,7 +70,9 @@ RECORDS = [
     _rec(0, 2, "collision", _measures(wall_hit=True, **HIT, min_ttc_s=0.0)),
     _rec(0, 3, "collision", _measures(wall_hit=True)),
     _rec(0, 4, "collision", _measures(person_hit="person-into-robot", person_role="boarding")),
-    _rec(0, 5, "timeout", _measures(stalls=2, time_still_s=12.0, intimate_share=0.25)),
+    _rec(
+        0, 5, "timeout", _measures(stalls=2, time_still_s=12.0, intimate_share=0.25, blocked=True)
+    ),
     _rec(0, 6, "timeout"),  # written before the measures: left out of them
 ]
 
@@ -85,6 +88,7 @@ def test_rates_by_kind_with_wilson_intervals_over_the_measured_episodes():
         "boarding_collision_rate": 1,
         "other_person_collision_rate": 0,
         "stall_rate": 1,
+        "blocked_timeout_rate": 1,
     }
     for key, k in expected.items():
         lo, hi = wilson_interval(k, 6)
@@ -92,6 +96,16 @@ def test_rates_by_kind_with_wilson_intervals_over_the_measured_episodes():
         assert (s[key]["lo"], s[key]["hi"]) == (pytest.approx(100 * lo), pytest.approx(100 * hi))
     # the event rates count every episode, measured or not
     assert s["collision_rate"]["mean"] == pytest.approx(300 / 7)
+
+
+def test_the_shut_out_rate_leaves_out_records_measured_before_it():
+    # a format-3 record written before `blocked` existed: its timeout may or may not have
+    # been shut out, so the rate is over the records that say
+    older = {k: v for k, v in _measures().items() if k != "blocked"}
+    s = summarize([*RECORDS, _rec(0, 7, "timeout", older)])["hr-rl/teacher"]
+    assert s["measured"] == 7 and s["blocked_timeout_rate"]["mean"] == pytest.approx(100 / 6)
+    s = summarize([_rec(0, 0, "timeout", older)])["hr-rl/teacher"]
+    assert math.isnan(s["blocked_timeout_rate"]["mean"])
 
 
 def test_means_over_all_or_only_the_successful_episodes():

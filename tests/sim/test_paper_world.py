@@ -125,6 +125,18 @@ def test_the_mirror_scenario():
     assert a.robot_goal.mirrored() == b.robot_goal
 
 
+def test_the_last_boarders_spot_beside_the_door_is_a_layout_parameter():
+    # the default is the paper world's spot (docs/simulator.md); another span moves only the
+    # last boarder's goal, towards the humans' side in both worlds
+    assert get_scenario("hr-rl").humans[1].goal.x == (0.1, 0.35)
+    for side, sign in (("right", 1.0), ("left", -1.0)):
+        base = elevator_scenario(ElevatorLayout(human_side=side))
+        moved = elevator_scenario(ElevatorLayout(human_side=side, last_boarder_x=(0.45, 0.6)))
+        assert sorted(sign * x for x in moved.humans[1].goal.x) == [0.45, 0.6]
+        assert moved.humans[1].goal.y == base.humans[1].goal.y
+        assert moved.humans[0] == base.humans[0] and moved.humans[2] == base.humans[2]
+
+
 def _obstacles_within(s, i: int, gap: float, walls: np.ndarray) -> int:
     """How many bodies and walls are within ``gap`` of human i's surface."""
     from pioneer.sim.scenarios.spec import _wall_distance

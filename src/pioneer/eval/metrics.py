@@ -84,6 +84,8 @@ class Measure:
     high: float
     successes_only: bool = False  # a mean over successful episodes only (like TT and PL)
     test: Callable[[Mapping[str, Any]], bool] | None = None  # a rate: which episodes count
+    # a rate of a measure added later: records whose measures lack this key are left out
+    since_key: str | None = None
 
     @property
     def is_rate(self) -> bool:
@@ -123,6 +125,14 @@ MEASURE_LIST: tuple[Measure, ...] = (
     Measure("path_efficiency", 0.0, 1.0, successes_only=True),
     Measure("time_still_s", 0.0, _INF),
     Measure("stall_rate", 0.0, 100.0, test=lambda m: (m.get("stalls") or 0) > 0),
+    # timeouts whose end left the robot no way to its goal (people standing where they were)
+    Measure(
+        "blocked_timeout_rate",
+        0.0,
+        100.0,
+        test=lambda m: m.get("blocked") is True,
+        since_key="blocked",
+    ),
     # smoothness
     Measure("accel_mean_m_s2", 0.0, _INF),
     Measure("accel_max_m_s2", 0.0, _INF),
@@ -212,9 +222,11 @@ def _measure_values(measured: Sequence[tuple[Mapping[str, Any], str]], key: str)
 
 def _hits(measured: Sequence[tuple[Mapping[str, Any], str]], key: str) -> tuple[int, int]:
     """(episodes counted by the rate ``key``, episodes measured)."""
-    test = _MEASURE[key].test
+    measure = _MEASURE[key]
+    test, since = measure.test, measure.since_key
     assert test is not None
-    return sum(bool(test(m)) for m, _ in measured), len(measured)
+    rows = [m for m, _ in measured if since is None or since in m]
+    return sum(bool(test(m)) for m in rows), len(rows)
 
 
 def _finite_mean(values: Iterable[Any]) -> float:

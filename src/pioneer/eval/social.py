@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pioneer.eval.blocked import way_open
 from pioneer.eval.freepath import FreePath, free_space, shortest_free_path
 from pioneer.sim.humans import GONE
 from pioneer.sim.scenarios import ScenarioConfig
@@ -220,6 +221,9 @@ class EpisodeMeasures:
     person_hit: str | None = None  # "robot-into-person" or "person-into-robot"
     person_role: str | None = None  # the role of the person hit ("boarding", "exiting", …)
     person_index: int | None = None  # the person's slot in the scenario
+    # a timeout: no way to the goal was left at its end, people standing where they were
+    # (pioneer.eval.blocked); None: the episode did not time out
+    blocked: bool | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict, floats to 6 significant digits, NaN and inf as ``None``."""
@@ -250,6 +254,19 @@ def series_of(states: Sequence[State], robot_radius: float) -> dict[str, list[fl
 def _shortest(scenario: ScenarioConfig, start: F64, goal: F64) -> FreePath:
     space = free_space(scenario.walls, scenario.sim.robot.radius)
     return shortest_free_path(space, start, goal)
+
+
+def _blocked(scenario: ScenarioConfig, last: State) -> bool:
+    here = last.h_status[0] != GONE
+    return not way_open(
+        scenario.walls,
+        scenario.sim.robot.radius,
+        last.robot[0, :2],
+        last.goal[0],
+        scenario.sim.goal_tolerance,
+        last.h_pos[0][here],
+        last.h_radius[0][here],
+    )
 
 
 def measure_episode(
@@ -290,6 +307,8 @@ def measure_episode(
         hit["wall_hit"] = "wall" in collided_with
         if "human" in collided_with and len(states) >= 2:
             hit.update(_person_hit(scenario, states[-2], last, r_r))
+    if event == "timeout":
+        hit["blocked"] = _blocked(scenario, last)
     return EpisodeMeasures(
         shortest_path_m=shortest,
         spl=spl(event == "success", shortest, path),

@@ -251,6 +251,7 @@ GROUPS: dict[str, tuple[Column, ...]] = {
         Column("path_efficiency", "path eff. ↑", 3),
         Column("time_still_s", "still ↓ (s)", 2),
         Column("stall_rate", "stalled ↓ (%)", 1),
+        Column("blocked_timeout_rate", "shut out ↓ (%)", 1),
     ),
     "smoothness": (
         Column("accel_mean_m_s2", "mean abs(a) ↓ (m/s²)", 3),

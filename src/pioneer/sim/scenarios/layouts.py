@@ -54,6 +54,9 @@ class ElevatorLayout(Config):
     # HL-RR is the mirror image of HR-RL); False: the first on the right in both (compact).
     first_boarder_on_goal_side: bool = True
     boarders_queue: bool = True  # let the exiting passengers out first, then board one by one
+    # |x| of the last boarder's spot, beside the door's centre line on the humans' side (the
+    # earlier boarders' spots lie between it and the cabin's deep outer corner).
+    last_boarder_x: Span = (0.1, 0.35)  # [m]
     exit_start_x: Span = (-0.5, 0.5)  # [m] exiting passengers start in the cabin
     exit_start_y: Span | None = None  # [m] None: r_h + 0.3 … r_h + 0.9 (≤ depth)
     # After the door, the exiting passenger turns aside through these points (HR-RL: to the
@@ -154,7 +157,7 @@ def _boarders(lay: ElevatorLayout, r_r: float, side: float) -> list[HumanSpec]:
     # later boarder never has to pass an earlier one: with A = 2 m/s² at contact and a drive of
     # at most 1.4 m/s², two 0.6 m bodies cannot come closer than ≈ 1.4 m.
     deep = (hw_c - r_h - m - 0.15, hw_c - r_h - m, depth - r_h - m - 0.3, depth - r_h - m)
-    near = (0.1, 0.35, r_h + 0.15, r_h + 0.35)
+    near = (*lay.last_boarder_x, r_h + 0.15, r_h + 0.35)
     n_b = lay.n_boarding
     exiting = tuple(range(n_b, n_b + lay.n_exiting))
     humans: list[HumanSpec] = []
